@@ -87,7 +87,7 @@ class StreamDecoder:
         out: list[Message] = []
         if parts:
             if self._discarding:
-                stats.dropped_bytes += len(parts[0])
+                stats.dropped_bytes += len(parts[0]) + 1  # the delimiter ends the discard
                 parts[0] = b""
                 self._discarding = False
             append = out.append

@@ -97,7 +97,7 @@ def test_buffer_is_capped_and_overlong_runs_are_counted() -> None:
         assert decoder.pending_bytes <= fp.MAX_ENCODED_FRAME
     ack = fp.Ack(1, 2)
     assert decoder.feed(b"\x00" + fp.encode(ack)) == [ack]
-    assert decoder.stats.dropped_bytes == 10_000
+    assert decoder.stats.dropped_bytes == 10_001  # the run and the delimiter that ends it
     assert decoder.stats.framing_errors >= 1
 
 
@@ -134,3 +134,15 @@ def test_frame_one_byte_over_the_maximum_is_dropped_not_raised() -> None:
 
     with pytest.raises(fp.BadLength):
         fp.decode_frame(enc)
+
+
+def test_dropped_bytes_do_not_depend_on_how_reads_split_the_stream() -> None:
+    """An over-long run and its delimiter count the same fed whole or one byte at a time."""
+    stream = b"\x01" * 300 + b"\x00" + fp.encode(fp.Ack(1, 2))
+    whole = fp.StreamDecoder()
+    whole.feed(stream)
+    bytewise = fp.StreamDecoder()
+    for i in range(len(stream)):
+        bytewise.feed(stream[i : i + 1])
+    assert whole.stats.dropped_bytes == bytewise.stats.dropped_bytes == 301
+    assert whole.stats.frames_ok == bytewise.stats.frames_ok == 1

@@ -1,0 +1,444 @@
+/*
+ * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.0.
+ *
+ * Normative spec: firmware_protocol/PROTOCOL.md. Golden vectors:
+ * firmware_protocol/vectors/frames.json (checked by tests/firmware_protocol/test_c_codec.py).
+ *
+ * Made for microcontrollers: no malloc, no stdio, no floating-point arithmetic (the one f32
+ * field is moved as its 4 bytes), only <stdint.h> <stddef.h> <string.h> <stdbool.h>.
+ * Every multi-byte field is read and written with explicit byte shifts, so the code is
+ * independent of the host's byte order and alignment. The only assumption is that `float`
+ * is IEEE-754 binary32 (checked at compile time for its size).
+ *
+ *   on the wire:   COBS( type | seq | payload | crc_hi | crc_lo ) | 0x00
+ *   decoded frame: type u8 | seq u8 | payload (0..252 bytes) | crc u16 big-endian
+ *
+ * Sending:   dthc_msg_t m = {DTHC_MSG_ACK, seq, {0}}; m.u.ack.boot_id = id;
+ *            n = dthc_encode(&m, buf, sizeof buf);           (buf of DTHC_MAX_WIRE_FRAME)
+ * Receiving: dthc_rx_init(&rx); then for every received byte (e.g. in the UART ISR):
+ *            if (dthc_rx_feed_byte(&rx, byte, &m) == 1) handle(&m);
+ *
+ * Not thread-safe per object: one dthc_rx_t per link, fed from one context.
+ */
+#ifndef DTHC_PROTOCOL_H
+#define DTHC_PROTOCOL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* --- numbers (PROTOCOL.md sections 1-4, 8; firmware_protocol/constants.py) ------------- */
+
+#define DTHC_PROTOCOL_MAJOR 1
+#define DTHC_PROTOCOL_MINOR 0
+
+#define DTHC_DELIMITER 0x00
+/* Decoded frame = type(1) seq(1) payload(0..DTHC_MAX_PAYLOAD) crc(2). */
+#define DTHC_MAX_FRAME 256
+#define DTHC_MAX_PAYLOAD (DTHC_MAX_FRAME - 4)
+/* COBS adds one code byte per started 254-byte block: 256 bytes need 2. */
+#define DTHC_MAX_ENCODED_FRAME (DTHC_MAX_FRAME + 2)
+/* One complete frame on the wire, delimiter included: the size of an encode buffer. */
+#define DTHC_MAX_WIRE_FRAME (DTHC_MAX_ENCODED_FRAME + 1)
+/* The receive buffer (PROTOCOL.md section 2: "never holds more than 259 bytes"). */
+#define DTHC_RX_BUF_SIZE DTHC_MAX_WIRE_FRAME
+
+/* CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, not reflected, xorout 0x0000. */
+#define DTHC_CRC_POLY 0x1021
+#define DTHC_CRC_INIT 0xFFFF
+#define DTHC_CRC_CHECK_VALUE 0x29B1 /* CRC of the ASCII bytes "123456789" */
+
+#define DTHC_DEFAULT_SAMPLE_RATE_HZ 1000
+#define DTHC_SAMPLE_RATE_MIN_HZ 100
+#define DTHC_SAMPLE_RATE_MAX_HZ 20000
+#define DTHC_DEFAULT_BATCH_SIZE 5
+#define DTHC_MAX_BATCH_SIZE 100 /* CONFIGURE.batch_size range 1..100 */
+#define DTHC_MOVING_AVERAGE_MAX 32
+#define DTHC_LOW_PASS_MAX_HZ 500
+#define DTHC_ARC_LOST_MAX_MS 1000
+#define DTHC_DEFAULT_LEASE_MS 250
+#define DTHC_LEASE_MIN_MS 20
+#define DTHC_LEASE_MAX_MS 2000
+#define DTHC_DEFAULT_ZVEL_EXPIRY_MS 20
+#define DTHC_ZVEL_EXPIRY_MIN_MS 1
+#define DTHC_ZVEL_EXPIRY_MAX_MS 200
+/* Z_VELOCITY stream_seq is newer when (new - last) mod 2^16 is in 1..32767. */
+#define DTHC_STREAM_SEQ_NEWER_MAX 32767
+/* Sequenced commands outstanding at the host; outcomes remembered by the board. */
+#define DTHC_HOST_WINDOW 8
+#define DTHC_DEFAULT_ACK_TIMEOUT_MS 20
+#define DTHC_MAX_ATTEMPTS 5 /* first transmission + 4 retransmissions */
+#define DTHC_FAULT_REPEAT_MS 250
+/* SAMPLES.xy_speed_dmm_s when the board does not measure XY speed. */
+#define DTHC_XY_SPEED_UNKNOWN 0xFFFF
+/* HELLO_INFO.serial: ASCII, padded with 0x00 to this many bytes on the wire. */
+#define DTHC_SERIAL_LEN 16
+/* SAMPLES: fixed part of the payload, and the most samples that fit one frame
+ * (19 + 2N <= 252). CONFIGURE limits batch_size to DTHC_MAX_BATCH_SIZE; a receiver
+ * accepts any N that fits. */
+#define DTHC_SAMPLES_HEADER_SIZE 19
+#define DTHC_MAX_SAMPLES ((DTHC_MAX_PAYLOAD - DTHC_SAMPLES_HEADER_SIZE) / 2)
+
+/* --- code tables (PROTOCOL.md sections 6 and 7) ---------------------------------------- */
+
+/* First byte of every decoded frame. Host to board below 0x80, board to host above. */
+typedef enum {
+    DTHC_MSG_HELLO = 0x01,
+    DTHC_MSG_HEARTBEAT = 0x02,
+    DTHC_MSG_SET_LEASE = 0x03,
+    DTHC_MSG_TORCH = 0x04,
+    DTHC_MSG_OHMIC_SENSE = 0x05,
+    DTHC_MSG_Z_MOVE = 0x06,
+    DTHC_MSG_Z_PROBE = 0x07,
+    DTHC_MSG_Z_VELOCITY = 0x08,
+    DTHC_MSG_Z_STOP = 0x09,
+    DTHC_MSG_SET_CURRENT = 0x0A,
+    DTHC_MSG_CONFIGURE = 0x0B,
+    DTHC_MSG_QUERY = 0x0C,
+    DTHC_MSG_CLOCK_QUERY = 0x0D,
+    DTHC_MSG_FAULT_RESET = 0x0E,
+
+    DTHC_MSG_ACK = 0x80,
+    DTHC_MSG_NAK = 0x81,
+    DTHC_MSG_HELLO_INFO = 0x82,
+    DTHC_MSG_SAMPLES = 0x83,
+    DTHC_MSG_EVENT = 0x84,
+    DTHC_MSG_FAULT = 0x85,
+    DTHC_MSG_MOTION_DONE = 0x86,
+    DTHC_MSG_PROBE_RESULT = 0x87,
+    DTHC_MSG_STATUS = 0x88,
+    DTHC_MSG_CLOCK = 0x89
+} dthc_msg_type_t;
+
+/* Bit positions (indices) in the 16-bit input snapshot; bit = 1 when active.
+ * EVENT.input carries such an index; masks are (1u << DTHC_INPUT_x). */
+typedef enum {
+    DTHC_INPUT_ARC_OK = 0,
+    DTHC_INPUT_OHMIC = 1,
+    DTHC_INPUT_FLOAT = 2,
+    DTHC_INPUT_BREAKAWAY = 3,
+    DTHC_INPUT_THC_UP = 4,
+    DTHC_INPUT_THC_DOWN = 5,
+    DTHC_INPUT_ESTOP = 6,
+    DTHC_INPUT_Z_LIMIT_MIN = 7,
+    DTHC_INPUT_Z_LIMIT_MAX = 8
+} dthc_input_bit_t;
+
+/* The 8-bit status byte of SAMPLES and STATUS (masks). */
+typedef enum {
+    DTHC_STATUS_TORCH_ON = 1 << 0,
+    DTHC_STATUS_OHMIC_SENSE = 1 << 1,
+    DTHC_STATUS_FAULT_LATCHED = 1 << 2,
+    DTHC_STATUS_Z_BUSY = 1 << 3,
+    DTHC_STATUS_SAMPLE_OVERFLOW = 1 << 4,
+    DTHC_STATUS_SESSION = 1 << 5
+} dthc_status_bit_t;
+
+/* HELLO_INFO capability bits (masks of the u32). */
+typedef enum {
+    DTHC_CAP_XY_SPEED = 1 << 0,
+    DTHC_CAP_OHMIC = 1 << 1,
+    DTHC_CAP_FLOAT = 1 << 2,
+    DTHC_CAP_BREAKAWAY = 1 << 3,
+    DTHC_CAP_THC_UPDOWN = 1 << 4,
+    DTHC_CAP_CURRENT_OUT = 1 << 5,
+    DTHC_CAP_ESTOP = 1 << 6,
+    DTHC_CAP_Z_LIMITS = 1 << 7,
+    DTHC_CAP_FILTERS = 1 << 8
+} dthc_capability_t;
+
+/* Latched faults; bit (1u << code) in the 16-bit fault set. */
+typedef enum {
+    DTHC_FAULT_LEASE_EXPIRED = 0,
+    DTHC_FAULT_Z_LIMIT = 1,
+    DTHC_FAULT_BREAKAWAY = 2,
+    DTHC_FAULT_ESTOP = 3,
+    DTHC_FAULT_ARC_LOST = 4,
+    DTHC_FAULT_INTERNAL = 5
+} dthc_fault_code_t;
+
+typedef enum {
+    DTHC_NAK_UNKNOWN_TYPE = 1,
+    DTHC_NAK_BAD_LENGTH = 2,
+    DTHC_NAK_OUT_OF_RANGE = 3,  /* detail: index of the offending payload field */
+    DTHC_NAK_FAULT_LATCHED = 4, /* detail: lowest latched fault code */
+    DTHC_NAK_BUSY = 5,
+    DTHC_NAK_NO_SESSION = 6,
+    DTHC_NAK_UNSUPPORTED = 7,   /* detail: capability bit index */
+    DTHC_NAK_VERSION = 8,       /* detail: the board's protocol major */
+    DTHC_NAK_FAULT_ACTIVE = 9   /* detail: the fault whose cause is still present */
+} dthc_nak_code_t;
+
+typedef enum {
+    DTHC_RESET_POWER_ON = 0,
+    DTHC_RESET_WATCHDOG = 1,
+    DTHC_RESET_SOFTWARE = 2,
+    DTHC_RESET_BROWNOUT = 3,
+    DTHC_RESET_EXTERNAL = 4,
+    DTHC_RESET_UNKNOWN = 5
+} dthc_reset_reason_t;
+
+typedef enum {
+    DTHC_PROBE_CONTACT = 0,
+    DTHC_PROBE_NO_CONTACT = 1, /* max travel reached */
+    DTHC_PROBE_ABORTED = 2,    /* Z_STOP, fault or lease expiry */
+    DTHC_PROBE_LIMIT = 3       /* Z soft limit reached first */
+} dthc_probe_result_code_t;
+
+typedef enum {
+    DTHC_MOTION_REACHED = 0,
+    DTHC_MOTION_STOPPED = 1,
+    DTHC_MOTION_LIMIT = 2,
+    DTHC_MOTION_FAULT = 3,
+    DTHC_MOTION_SUPERSEDED = 4
+} dthc_motion_result_t;
+
+typedef enum {
+    DTHC_FILTER_NONE = 0,
+    DTHC_FILTER_MOVING_AVERAGE = 1, /* param: window in samples, 1..32 */
+    DTHC_FILTER_LOW_PASS = 2,       /* param: first-order cut-off in Hz, 1..500 */
+    DTHC_FILTER_MEDIAN3 = 3         /* param: ignored */
+} dthc_filter_kind_t;
+
+typedef enum {
+    DTHC_QUERY_STATUS = 0,
+    DTHC_QUERY_PROBE_RESULT = 1,
+    DTHC_QUERY_HELLO_INFO = 2,
+    DTHC_QUERY_MOTION_DONE = 3
+} dthc_query_what_t;
+
+/* Results of the decoding functions: 0 or one of these. */
+typedef enum {
+    DTHC_OK = 0,
+    DTHC_ERR_CRC = -1,          /* CRC over the decoded frame is not zero */
+    DTHC_ERR_COBS = -2,         /* invalid COBS (a block runs past the end, or a 0x00) */
+    DTHC_ERR_SHORT = -3,        /* decoded frame shorter than 4 bytes */
+    DTHC_ERR_UNKNOWN_TYPE = -4, /* valid CRC, type not in dthc_msg_type_t */
+    DTHC_ERR_BAD_LENGTH = -5,   /* known type, wrong payload length */
+    DTHC_ERR_TOO_LONG = -6      /* longer than the maximum frame, or the output buffer */
+} dthc_err_t;
+
+/* --- messages ---------------------------------------------------------------------------
+ * One struct per message type with the payload fields of firmware_protocol/messages.py in
+ * wire order. The header's `seq` lives in dthc_msg_t. Messages without payload have a
+ * placeholder member (ISO C has no empty structs); it is neither sent nor read. */
+
+typedef struct { uint8_t proto_major; uint8_t proto_minor; uint32_t host_nonce; } dthc_hello_t;
+typedef struct { uint8_t unused_; } dthc_heartbeat_t;
+typedef struct { uint16_t lease_ms; } dthc_set_lease_t;
+typedef struct { bool on; } dthc_torch_t;
+typedef struct { bool on; } dthc_ohmic_sense_t;
+typedef struct { int32_t target_um; uint32_t feed_um_s; } dthc_z_move_t;
+typedef struct {
+    uint32_t feed_um_s;
+    uint32_t max_travel_um;
+    uint16_t sensors; /* input bit mask */
+} dthc_z_probe_t;
+typedef struct { uint16_t stream_seq; int32_t velocity_um_s; uint16_t expiry_ms; } dthc_z_velocity_t;
+typedef struct { uint8_t unused_; } dthc_z_stop_t;
+typedef struct { uint16_t current_da; } dthc_set_current_t;
+typedef struct {
+    uint16_t sample_rate_hz;
+    uint8_t batch_size;
+    uint8_t filter_kind;
+    uint16_t filter_param;
+    uint16_t arc_lost_ms;
+    int32_t cal_offset;
+    float cal_scale; /* IEEE-754 binary32, volts per raw count */
+} dthc_configure_t;
+typedef struct { uint8_t what; } dthc_query_t;
+typedef struct { uint8_t unused_; } dthc_clock_query_t;
+typedef struct { uint16_t mask; } dthc_fault_reset_t;
+
+typedef struct { uint32_t boot_id; } dthc_ack_t;
+typedef struct { uint32_t boot_id; uint8_t code; uint8_t detail; } dthc_nak_t;
+typedef struct {
+    uint8_t proto_major;
+    uint8_t proto_minor;
+    uint8_t fw_major;
+    uint8_t fw_minor;
+    uint8_t fw_patch;
+    uint8_t reset_reason;
+    uint32_t boot_id;
+    /* NUL-terminated. Decoding stops at the first 0x00 on the wire; encoding sends the
+     * bytes before the first NUL, at most DTHC_SERIAL_LEN, padded with 0x00. */
+    char serial[DTHC_SERIAL_LEN + 1];
+    uint16_t sample_rate_hz;
+    uint8_t batch_size;
+    uint32_t capabilities;
+    int32_t z_min_um;
+    int32_t z_max_um;
+    uint16_t max_frame;
+    uint16_t lease_ms;
+} dthc_hello_info_t;
+typedef struct {
+    uint16_t stream_seq;
+    uint32_t t0_us;
+    uint16_t period_us;
+    int32_t z_um;
+    uint16_t inputs;
+    uint16_t zvel_seq;
+    uint16_t xy_speed_dmm_s;
+    uint8_t status;
+    uint8_t n_samples; /* 0..DTHC_MAX_SAMPLES; the payload is 19 + 2 * n_samples bytes */
+    uint16_t samples_cv[DTHC_MAX_SAMPLES];
+} dthc_samples_t;
+typedef struct {
+    uint32_t counter;
+    uint32_t t_us;
+    uint8_t input;
+    uint8_t level;
+    uint16_t inputs;
+    int32_t z_um;
+} dthc_event_t;
+typedef struct {
+    uint32_t counter;
+    uint32_t t_us;
+    uint8_t code;
+    uint8_t detail;
+    uint16_t faults;
+    int32_t z_um;
+} dthc_fault_t;
+typedef struct { uint8_t result; int32_t z_um; uint32_t t_us; } dthc_motion_done_t;
+typedef struct {
+    uint8_t result;
+    uint16_t sensor;
+    int32_t contact_z_um;
+    int32_t stop_z_um;
+    uint32_t t_us;
+} dthc_probe_result_t;
+typedef struct {
+    uint32_t boot_id;
+    uint32_t t_us;
+    uint16_t faults;
+    uint16_t inputs;
+    uint8_t status;
+    uint16_t lease_ms;
+    uint32_t event_counter;
+    uint16_t sample_seq;
+    uint16_t zvel_seq;
+    int32_t z_um;
+    uint16_t current_da;
+    uint16_t rx_crc_errors;
+    uint16_t rx_framing_errors;
+    uint16_t rx_duplicates;
+} dthc_status_t;
+typedef struct { uint64_t t_us; } dthc_clock_t;
+
+/* A message: header plus the payload selected by `type` (a dthc_msg_type_t). */
+typedef struct {
+    uint8_t type;
+    uint8_t seq;
+    union {
+        dthc_hello_t hello;
+        dthc_heartbeat_t heartbeat;
+        dthc_set_lease_t set_lease;
+        dthc_torch_t torch;
+        dthc_ohmic_sense_t ohmic_sense;
+        dthc_z_move_t z_move;
+        dthc_z_probe_t z_probe;
+        dthc_z_velocity_t z_velocity;
+        dthc_z_stop_t z_stop;
+        dthc_set_current_t set_current;
+        dthc_configure_t configure;
+        dthc_query_t query;
+        dthc_clock_query_t clock_query;
+        dthc_fault_reset_t fault_reset;
+        dthc_ack_t ack;
+        dthc_nak_t nak;
+        dthc_hello_info_t hello_info;
+        dthc_samples_t samples;
+        dthc_event_t event;
+        dthc_fault_t fault;
+        dthc_motion_done_t motion_done;
+        dthc_probe_result_t probe_result;
+        dthc_status_t status;
+        dthc_clock_t clock;
+    } u;
+} dthc_msg_t;
+
+/* --- functions -------------------------------------------------------------------------- */
+
+/* CRC-16/CCITT-FALSE of `len` bytes. dthc_crc16_update continues a running CRC (start
+ * with DTHC_CRC_INIT). The CRC of a whole decoded frame, CRC bytes included, is 0. */
+uint16_t dthc_crc16(const uint8_t *data, size_t len);
+uint16_t dthc_crc16_update(uint16_t crc, uint8_t byte);
+
+/* Payload size of a message type: the fixed size, for SAMPLES the fixed part
+ * (DTHC_SAMPLES_HEADER_SIZE, plus 2 per sample), or -1 for an unknown type. */
+int dthc_payload_size(uint8_t type);
+
+/* COBS-encode `len` bytes (no delimiter appended). Returns the encoded length (>= 1), or 0
+ * if it does not fit `cap` bytes. The output is at most len + len / 254 + 1 bytes. */
+size_t dthc_cobs_encode(const uint8_t *in, size_t len, uint8_t *out, size_t cap);
+
+/* COBS-decode `len` bytes (without the delimiter) into `out`; `out` may equal `in`
+ * (in-place). Sets *out_len and returns 0, or returns DTHC_ERR_COBS (invalid input) or
+ * DTHC_ERR_TOO_LONG (does not fit `cap`). */
+int dthc_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap, size_t *out_len);
+
+/* The decoded frame body without CRC (type, seq, payload) of `msg`. Returns its length, or
+ * 0 on error (unknown type, n_samples > DTHC_MAX_SAMPLES, serial longer than 16, or it
+ * does not fit `cap`). */
+size_t dthc_encode_body(const dthc_msg_t *msg, uint8_t *out, size_t cap);
+
+/* The complete wire frame of `msg`: COBS(body | crc_hi | crc_lo) | 0x00. Returns its length,
+ * or 0 on error (as dthc_encode_body). A buffer of DTHC_MAX_WIRE_FRAME bytes always fits. */
+size_t dthc_encode(const dthc_msg_t *msg, uint8_t *out, size_t cap);
+
+/* Decode one decoded frame (type, seq, payload, crc; COBS already removed). Checks, in
+ * order: length <= DTHC_MAX_FRAME (TOO_LONG), length >= 4 (SHORT), CRC, known type, exact
+ * payload length. Returns 0 and fills *out, or a negative dthc_err_t (*out untouched). */
+int dthc_decode_body(const uint8_t *raw, size_t len, dthc_msg_t *out);
+
+/* Streaming receiver (PROTOCOL.md section 2, "Receiving and resynchronising").
+ * COBS decoding and the CRC run as the bytes arrive, so a byte costs O(1); at the
+ * delimiter only the payload fields are unpacked. The counters mean what the Python
+ * firmware_protocol.stream.DecoderStats counters mean:
+ *   frames_ok       valid messages delivered
+ *   crc_errors      frames with a bad CRC
+ *   framing_errors  invalid COBS, decoded length < 4 or > DTHC_MAX_FRAME, or more than
+ *                   DTHC_MAX_ENCODED_FRAME bytes without a delimiter (one error; the rest
+ *                   up to the next 0x00 is discarded)
+ *   unknown_type    valid CRC, unknown type
+ *   length_errors   known type, wrong payload length
+ *   dropped_bytes   bytes of dropped frames, each with the delimiter that ended it
+ *                   (idle delimiters, i.e. empty frames, count nothing)
+ *   bytes_in        every byte fed */
+typedef struct {
+    uint8_t buf[DTHC_RX_BUF_SIZE]; /* decoded bytes of the frame being received */
+    uint16_t enc_len;              /* encoded bytes received since the last delimiter */
+    uint16_t dec_len;              /* decoded bytes in buf */
+    uint16_t crc;                  /* running CRC over buf[0..dec_len) */
+    uint8_t block_left;            /* data bytes left in the current COBS block */
+    bool zero_pending;             /* the current block ends in an implied 0x00 */
+    bool discarding;               /* after an over-long run: drop up to the next 0x00 */
+    uint32_t bytes_in;
+    uint32_t frames_ok;
+    uint32_t crc_errors;
+    uint32_t framing_errors;
+    uint32_t unknown_type;
+    uint32_t length_errors;
+    uint32_t dropped_bytes;
+} dthc_rx_t;
+
+/* Clear the receiver, counters included. */
+void dthc_rx_init(dthc_rx_t *rx);
+
+/* Forget a partial frame (after reopening the link); keeps the counters. */
+void dthc_rx_reset(dthc_rx_t *rx);
+
+/* Feed one received byte. Returns 1 when it completed a valid message (written to *out),
+ * 0 when more bytes are needed (or on an idle delimiter), or a negative dthc_err_t when a
+ * frame was dropped (it is counted; *out is untouched). */
+int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* DTHC_PROTOCOL_H */

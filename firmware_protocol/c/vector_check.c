@@ -1,0 +1,499 @@
+/*
+ * vector_check.c - drive the C reference codec from text lines on stdin (used by
+ * tests/firmware_protocol/test_c_codec.py; handy by hand too).
+ *
+ * Input lines (hex without separators, any case; lines of any length):
+ *   F <hex>   wire frame(s): fed byte by byte to a fresh streaming receiver. For each
+ *             message: "OK <MessageName> key=value ..." then "RE <hex>" (the message
+ *             re-encoded by dthc_encode); for each dropped frame "ERR <code>"; if the
+ *             bytes complete nothing at all, "ERR INCOMPLETE".
+ *   B <hex>   one decoded frame (type, seq, payload, crc) for dthc_decode_body:
+ *             "OK ..." and "BODY <hex>" (dthc_encode_body), or "ERR <code>".
+ *   S <hex>   a (damaged) stream, fed byte by byte to a fresh receiver: "MSG <MessageName>
+ *             key=value ..." per message, then "STATS frames_ok=.. crc_errors=..
+ *             framing_errors=.. unknown_type=.. length_errors=.. dropped_bytes=..".
+ *   C <hex>   "CRC <4 hex digits>" (CRC-16/CCITT-FALSE).
+ *   E <hex>   "COBS <hex>" (dthc_cobs_encode), or "ERR <code>".
+ *   D <hex>   "RAW <hex>" (dthc_cobs_decode), or "ERR <code>".
+ *   K         every constant of dthc_protocol.h as "NAME value" lines, then "END".
+ * Empty lines and lines starting with '#' are ignored; anything else prints "ERR SYNTAX".
+ *
+ * Fields are printed in the order of firmware_protocol/messages.py: integers in decimal,
+ * bool as 0/1, samples_cv comma-separated (empty when there are none), cal_scale with
+ * %.9g (enough to restore the binary32 exactly), serial as its characters with '\\' and
+ * bytes outside 0x21..0x7E written as \xNN.
+ */
+#include <inttypes.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "dthc_protocol.h"
+
+/* Raw bytes of the line being read (up to the largest stream a test sends). */
+#define LINE_MAX_BYTES 65536
+
+static uint8_t g_line[LINE_MAX_BYTES];
+
+static const char *msg_name(uint8_t type)
+{
+    switch (type) {
+    case DTHC_MSG_HELLO: return "Hello";
+    case DTHC_MSG_HEARTBEAT: return "Heartbeat";
+    case DTHC_MSG_SET_LEASE: return "SetLease";
+    case DTHC_MSG_TORCH: return "Torch";
+    case DTHC_MSG_OHMIC_SENSE: return "OhmicSense";
+    case DTHC_MSG_Z_MOVE: return "ZMove";
+    case DTHC_MSG_Z_PROBE: return "ZProbe";
+    case DTHC_MSG_Z_VELOCITY: return "ZVelocity";
+    case DTHC_MSG_Z_STOP: return "ZStop";
+    case DTHC_MSG_SET_CURRENT: return "SetCurrent";
+    case DTHC_MSG_CONFIGURE: return "Configure";
+    case DTHC_MSG_QUERY: return "Query";
+    case DTHC_MSG_CLOCK_QUERY: return "ClockQuery";
+    case DTHC_MSG_FAULT_RESET: return "FaultReset";
+    case DTHC_MSG_ACK: return "Ack";
+    case DTHC_MSG_NAK: return "Nak";
+    case DTHC_MSG_HELLO_INFO: return "HelloInfo";
+    case DTHC_MSG_SAMPLES: return "Samples";
+    case DTHC_MSG_EVENT: return "Event";
+    case DTHC_MSG_FAULT: return "Fault";
+    case DTHC_MSG_MOTION_DONE: return "MotionDone";
+    case DTHC_MSG_PROBE_RESULT: return "ProbeResult";
+    case DTHC_MSG_STATUS: return "Status";
+    case DTHC_MSG_CLOCK: return "Clock";
+    default: return "?";
+    }
+}
+
+static const char *err_name(int rc)
+{
+    switch (rc) {
+    case DTHC_ERR_CRC: return "CRC";
+    case DTHC_ERR_COBS: return "COBS";
+    case DTHC_ERR_SHORT: return "SHORT";
+    case DTHC_ERR_UNKNOWN_TYPE: return "UNKNOWN_TYPE";
+    case DTHC_ERR_BAD_LENGTH: return "BAD_LENGTH";
+    case DTHC_ERR_TOO_LONG: return "TOO_LONG";
+    default: return "?";
+    }
+}
+
+static void print_hex(const uint8_t *p, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        printf("%02x", p[i]);
+    }
+}
+
+static void pu(const char *key, uint32_t v) { printf(" %s=%" PRIu32, key, v); }
+static void pi(const char *key, int32_t v) { printf(" %s=%" PRId32, key, v); }
+
+static void print_fields(const dthc_msg_t *m)
+{
+    size_t i;
+    printf("%s seq=%u", msg_name(m->type), (unsigned)m->seq);
+    switch (m->type) {
+    case DTHC_MSG_HELLO:
+        pu("proto_major", m->u.hello.proto_major);
+        pu("proto_minor", m->u.hello.proto_minor);
+        pu("host_nonce", m->u.hello.host_nonce);
+        break;
+    case DTHC_MSG_HEARTBEAT:
+    case DTHC_MSG_Z_STOP:
+    case DTHC_MSG_CLOCK_QUERY:
+        break;
+    case DTHC_MSG_SET_LEASE:
+        pu("lease_ms", m->u.set_lease.lease_ms);
+        break;
+    case DTHC_MSG_TORCH:
+        pu("on", m->u.torch.on ? 1u : 0u);
+        break;
+    case DTHC_MSG_OHMIC_SENSE:
+        pu("on", m->u.ohmic_sense.on ? 1u : 0u);
+        break;
+    case DTHC_MSG_Z_MOVE:
+        pi("target_um", m->u.z_move.target_um);
+        pu("feed_um_s", m->u.z_move.feed_um_s);
+        break;
+    case DTHC_MSG_Z_PROBE:
+        pu("feed_um_s", m->u.z_probe.feed_um_s);
+        pu("max_travel_um", m->u.z_probe.max_travel_um);
+        pu("sensors", m->u.z_probe.sensors);
+        break;
+    case DTHC_MSG_Z_VELOCITY:
+        pu("stream_seq", m->u.z_velocity.stream_seq);
+        pi("velocity_um_s", m->u.z_velocity.velocity_um_s);
+        pu("expiry_ms", m->u.z_velocity.expiry_ms);
+        break;
+    case DTHC_MSG_SET_CURRENT:
+        pu("current_da", m->u.set_current.current_da);
+        break;
+    case DTHC_MSG_CONFIGURE:
+        pu("sample_rate_hz", m->u.configure.sample_rate_hz);
+        pu("batch_size", m->u.configure.batch_size);
+        pu("filter_kind", m->u.configure.filter_kind);
+        pu("filter_param", m->u.configure.filter_param);
+        pu("arc_lost_ms", m->u.configure.arc_lost_ms);
+        pi("cal_offset", m->u.configure.cal_offset);
+        printf(" cal_scale=%.9g", (double)m->u.configure.cal_scale);
+        break;
+    case DTHC_MSG_QUERY:
+        pu("what", m->u.query.what);
+        break;
+    case DTHC_MSG_FAULT_RESET:
+        pu("mask", m->u.fault_reset.mask);
+        break;
+    case DTHC_MSG_ACK:
+        pu("boot_id", m->u.ack.boot_id);
+        break;
+    case DTHC_MSG_NAK:
+        pu("boot_id", m->u.nak.boot_id);
+        pu("code", m->u.nak.code);
+        pu("detail", m->u.nak.detail);
+        break;
+    case DTHC_MSG_HELLO_INFO: {
+        const dthc_hello_info_t *h = &m->u.hello_info;
+        pu("proto_major", h->proto_major);
+        pu("proto_minor", h->proto_minor);
+        pu("fw_major", h->fw_major);
+        pu("fw_minor", h->fw_minor);
+        pu("fw_patch", h->fw_patch);
+        pu("reset_reason", h->reset_reason);
+        pu("boot_id", h->boot_id);
+        printf(" serial=");
+        for (i = 0; i < DTHC_SERIAL_LEN && h->serial[i] != '\0'; i++) {
+            unsigned c = (unsigned char)h->serial[i];
+            if (c < 0x21 || c > 0x7E || c == '\\') {
+                printf("\\x%02x", c);
+            } else {
+                putchar((int)c);
+            }
+        }
+        pu("sample_rate_hz", h->sample_rate_hz);
+        pu("batch_size", h->batch_size);
+        pu("capabilities", h->capabilities);
+        pi("z_min_um", h->z_min_um);
+        pi("z_max_um", h->z_max_um);
+        pu("max_frame", h->max_frame);
+        pu("lease_ms", h->lease_ms);
+        break;
+    }
+    case DTHC_MSG_SAMPLES: {
+        const dthc_samples_t *s = &m->u.samples;
+        pu("stream_seq", s->stream_seq);
+        pu("t0_us", s->t0_us);
+        pu("period_us", s->period_us);
+        pi("z_um", s->z_um);
+        pu("inputs", s->inputs);
+        pu("zvel_seq", s->zvel_seq);
+        pu("xy_speed_dmm_s", s->xy_speed_dmm_s);
+        pu("status", s->status);
+        printf(" samples_cv=");
+        for (i = 0; i < s->n_samples; i++) {
+            printf(i ? ",%u" : "%u", (unsigned)s->samples_cv[i]);
+        }
+        break;
+    }
+    case DTHC_MSG_EVENT:
+        pu("counter", m->u.event.counter);
+        pu("t_us", m->u.event.t_us);
+        pu("input", m->u.event.input);
+        pu("level", m->u.event.level);
+        pu("inputs", m->u.event.inputs);
+        pi("z_um", m->u.event.z_um);
+        break;
+    case DTHC_MSG_FAULT:
+        pu("counter", m->u.fault.counter);
+        pu("t_us", m->u.fault.t_us);
+        pu("code", m->u.fault.code);
+        pu("detail", m->u.fault.detail);
+        pu("faults", m->u.fault.faults);
+        pi("z_um", m->u.fault.z_um);
+        break;
+    case DTHC_MSG_MOTION_DONE:
+        pu("result", m->u.motion_done.result);
+        pi("z_um", m->u.motion_done.z_um);
+        pu("t_us", m->u.motion_done.t_us);
+        break;
+    case DTHC_MSG_PROBE_RESULT:
+        pu("result", m->u.probe_result.result);
+        pu("sensor", m->u.probe_result.sensor);
+        pi("contact_z_um", m->u.probe_result.contact_z_um);
+        pi("stop_z_um", m->u.probe_result.stop_z_um);
+        pu("t_us", m->u.probe_result.t_us);
+        break;
+    case DTHC_MSG_STATUS: {
+        const dthc_status_t *s = &m->u.status;
+        pu("boot_id", s->boot_id);
+        pu("t_us", s->t_us);
+        pu("faults", s->faults);
+        pu("inputs", s->inputs);
+        pu("status", s->status);
+        pu("lease_ms", s->lease_ms);
+        pu("event_counter", s->event_counter);
+        pu("sample_seq", s->sample_seq);
+        pu("zvel_seq", s->zvel_seq);
+        pi("z_um", s->z_um);
+        pu("current_da", s->current_da);
+        pu("rx_crc_errors", s->rx_crc_errors);
+        pu("rx_framing_errors", s->rx_framing_errors);
+        pu("rx_duplicates", s->rx_duplicates);
+        break;
+    }
+    case DTHC_MSG_CLOCK:
+        printf(" t_us=%" PRIu64, m->u.clock.t_us);
+        break;
+    default:
+        break;
+    }
+}
+
+static void print_constants(void)
+{
+#define K(name) printf("%s %ld\n", #name, (long)(name))
+    K(DTHC_PROTOCOL_MAJOR); K(DTHC_PROTOCOL_MINOR); K(DTHC_DELIMITER); K(DTHC_MAX_FRAME);
+    K(DTHC_MAX_PAYLOAD); K(DTHC_MAX_ENCODED_FRAME); K(DTHC_MAX_WIRE_FRAME);
+    K(DTHC_RX_BUF_SIZE); K(DTHC_CRC_POLY); K(DTHC_CRC_INIT); K(DTHC_CRC_CHECK_VALUE);
+    K(DTHC_DEFAULT_SAMPLE_RATE_HZ); K(DTHC_SAMPLE_RATE_MIN_HZ); K(DTHC_SAMPLE_RATE_MAX_HZ);
+    K(DTHC_DEFAULT_BATCH_SIZE); K(DTHC_MAX_BATCH_SIZE); K(DTHC_MOVING_AVERAGE_MAX);
+    K(DTHC_LOW_PASS_MAX_HZ); K(DTHC_ARC_LOST_MAX_MS); K(DTHC_DEFAULT_LEASE_MS);
+    K(DTHC_LEASE_MIN_MS); K(DTHC_LEASE_MAX_MS); K(DTHC_DEFAULT_ZVEL_EXPIRY_MS);
+    K(DTHC_ZVEL_EXPIRY_MIN_MS); K(DTHC_ZVEL_EXPIRY_MAX_MS); K(DTHC_STREAM_SEQ_NEWER_MAX);
+    K(DTHC_HOST_WINDOW); K(DTHC_DEFAULT_ACK_TIMEOUT_MS); K(DTHC_MAX_ATTEMPTS);
+    K(DTHC_FAULT_REPEAT_MS); K(DTHC_XY_SPEED_UNKNOWN); K(DTHC_SERIAL_LEN);
+    K(DTHC_SAMPLES_HEADER_SIZE); K(DTHC_MAX_SAMPLES);
+
+    K(DTHC_MSG_HELLO); K(DTHC_MSG_HEARTBEAT); K(DTHC_MSG_SET_LEASE); K(DTHC_MSG_TORCH);
+    K(DTHC_MSG_OHMIC_SENSE); K(DTHC_MSG_Z_MOVE); K(DTHC_MSG_Z_PROBE); K(DTHC_MSG_Z_VELOCITY);
+    K(DTHC_MSG_Z_STOP); K(DTHC_MSG_SET_CURRENT); K(DTHC_MSG_CONFIGURE); K(DTHC_MSG_QUERY);
+    K(DTHC_MSG_CLOCK_QUERY); K(DTHC_MSG_FAULT_RESET); K(DTHC_MSG_ACK); K(DTHC_MSG_NAK);
+    K(DTHC_MSG_HELLO_INFO); K(DTHC_MSG_SAMPLES); K(DTHC_MSG_EVENT); K(DTHC_MSG_FAULT);
+    K(DTHC_MSG_MOTION_DONE); K(DTHC_MSG_PROBE_RESULT); K(DTHC_MSG_STATUS); K(DTHC_MSG_CLOCK);
+
+    K(DTHC_INPUT_ARC_OK); K(DTHC_INPUT_OHMIC); K(DTHC_INPUT_FLOAT); K(DTHC_INPUT_BREAKAWAY);
+    K(DTHC_INPUT_THC_UP); K(DTHC_INPUT_THC_DOWN); K(DTHC_INPUT_ESTOP);
+    K(DTHC_INPUT_Z_LIMIT_MIN); K(DTHC_INPUT_Z_LIMIT_MAX);
+
+    K(DTHC_STATUS_TORCH_ON); K(DTHC_STATUS_OHMIC_SENSE); K(DTHC_STATUS_FAULT_LATCHED);
+    K(DTHC_STATUS_Z_BUSY); K(DTHC_STATUS_SAMPLE_OVERFLOW); K(DTHC_STATUS_SESSION);
+
+    K(DTHC_CAP_XY_SPEED); K(DTHC_CAP_OHMIC); K(DTHC_CAP_FLOAT); K(DTHC_CAP_BREAKAWAY);
+    K(DTHC_CAP_THC_UPDOWN); K(DTHC_CAP_CURRENT_OUT); K(DTHC_CAP_ESTOP); K(DTHC_CAP_Z_LIMITS);
+    K(DTHC_CAP_FILTERS);
+
+    K(DTHC_FAULT_LEASE_EXPIRED); K(DTHC_FAULT_Z_LIMIT); K(DTHC_FAULT_BREAKAWAY);
+    K(DTHC_FAULT_ESTOP); K(DTHC_FAULT_ARC_LOST); K(DTHC_FAULT_INTERNAL);
+
+    K(DTHC_NAK_UNKNOWN_TYPE); K(DTHC_NAK_BAD_LENGTH); K(DTHC_NAK_OUT_OF_RANGE);
+    K(DTHC_NAK_FAULT_LATCHED); K(DTHC_NAK_BUSY); K(DTHC_NAK_NO_SESSION);
+    K(DTHC_NAK_UNSUPPORTED); K(DTHC_NAK_VERSION); K(DTHC_NAK_FAULT_ACTIVE);
+
+    K(DTHC_RESET_POWER_ON); K(DTHC_RESET_WATCHDOG); K(DTHC_RESET_SOFTWARE);
+    K(DTHC_RESET_BROWNOUT); K(DTHC_RESET_EXTERNAL); K(DTHC_RESET_UNKNOWN);
+
+    K(DTHC_PROBE_CONTACT); K(DTHC_PROBE_NO_CONTACT); K(DTHC_PROBE_ABORTED);
+    K(DTHC_PROBE_LIMIT);
+
+    K(DTHC_MOTION_REACHED); K(DTHC_MOTION_STOPPED); K(DTHC_MOTION_LIMIT);
+    K(DTHC_MOTION_FAULT); K(DTHC_MOTION_SUPERSEDED);
+
+    K(DTHC_FILTER_NONE); K(DTHC_FILTER_MOVING_AVERAGE); K(DTHC_FILTER_LOW_PASS);
+    K(DTHC_FILTER_MEDIAN3);
+
+    K(DTHC_QUERY_STATUS); K(DTHC_QUERY_PROBE_RESULT); K(DTHC_QUERY_HELLO_INFO);
+    K(DTHC_QUERY_MOTION_DONE);
+
+    K(DTHC_OK); K(DTHC_ERR_CRC); K(DTHC_ERR_COBS); K(DTHC_ERR_SHORT);
+    K(DTHC_ERR_UNKNOWN_TYPE); K(DTHC_ERR_BAD_LENGTH); K(DTHC_ERR_TOO_LONG);
+#undef K
+    printf("END\n");
+}
+
+static int hex_digit(int c)
+{
+    if (c >= '0' && c <= '9') {
+        return c - '0';
+    }
+    if (c >= 'a' && c <= 'f') {
+        return c - 'a' + 10;
+    }
+    if (c >= 'A' && c <= 'F') {
+        return c - 'A' + 10;
+    }
+    return -1;
+}
+
+/* Read the rest of the line as hex into g_line. Returns the byte count, or -1 on a
+ * syntax error (odd digit count, bad character, too long); the line is consumed either way. */
+static long read_hex_line(void)
+{
+    long n = 0;
+    int hi = -1;
+    int bad = 0;
+    int c;
+    while ((c = getchar()) != EOF && c != '\n') {
+        int d;
+        if (c == ' ' || c == '\t' || c == '\r') {
+            continue;
+        }
+        d = hex_digit(c);
+        if (d < 0 || n >= LINE_MAX_BYTES) {
+            bad = 1;
+            continue;
+        }
+        if (hi < 0) {
+            hi = d;
+        } else {
+            g_line[n++] = (uint8_t)((hi << 4) | d);
+            hi = -1;
+        }
+    }
+    return (bad || hi >= 0) ? -1 : n;
+}
+
+static void skip_line(int c)
+{
+    while (c != EOF && c != '\n') {
+        c = getchar();
+    }
+}
+
+static void cmd_frame(size_t n)
+{
+    static dthc_rx_t rx;
+    static dthc_msg_t msg;
+    static uint8_t wire[DTHC_MAX_WIRE_FRAME];
+    int any = 0;
+    size_t i;
+    dthc_rx_init(&rx);
+    for (i = 0; i < n; i++) {
+        int rc = dthc_rx_feed_byte(&rx, g_line[i], &msg);
+        if (rc == 1) {
+            size_t len = dthc_encode(&msg, wire, sizeof wire);
+            printf("OK ");
+            print_fields(&msg);
+            printf("\n");
+            if (len == 0) {
+                printf("ERR ENCODE\n");
+            } else {
+                printf("RE ");
+                print_hex(wire, len);
+                printf("\n");
+            }
+            any = 1;
+        } else if (rc < 0) {
+            printf("ERR %s\n", err_name(rc));
+            any = 1;
+        }
+    }
+    if (!any) {
+        printf("ERR INCOMPLETE\n");
+    }
+}
+
+static void cmd_body(size_t n)
+{
+    static dthc_msg_t msg;
+    static uint8_t body[DTHC_MAX_FRAME];
+    int rc = dthc_decode_body(g_line, n, &msg);
+    size_t len;
+    if (rc != DTHC_OK) {
+        printf("ERR %s\n", err_name(rc));
+        return;
+    }
+    printf("OK ");
+    print_fields(&msg);
+    printf("\n");
+    len = dthc_encode_body(&msg, body, sizeof body);
+    if (len == 0) {
+        printf("ERR ENCODE\n");
+        return;
+    }
+    printf("BODY ");
+    print_hex(body, len);
+    printf("\n");
+}
+
+static void cmd_stream(size_t n)
+{
+    static dthc_rx_t rx;
+    static dthc_msg_t msg;
+    size_t i;
+    dthc_rx_init(&rx);
+    for (i = 0; i < n; i++) {
+        if (dthc_rx_feed_byte(&rx, g_line[i], &msg) == 1) {
+            printf("MSG ");
+            print_fields(&msg);
+            printf("\n");
+        }
+    }
+    printf("STATS frames_ok=%" PRIu32 " crc_errors=%" PRIu32 " framing_errors=%" PRIu32
+           " unknown_type=%" PRIu32 " length_errors=%" PRIu32 " dropped_bytes=%" PRIu32
+           " bytes_in=%" PRIu32 "\n",
+           rx.frames_ok, rx.crc_errors, rx.framing_errors, rx.unknown_type, rx.length_errors,
+           rx.dropped_bytes, rx.bytes_in);
+}
+
+static void cmd_cobs(int decode, size_t n)
+{
+    static uint8_t out[LINE_MAX_BYTES + LINE_MAX_BYTES / 254 + 2];
+    size_t len = 0;
+    if (decode) {
+        int rc = dthc_cobs_decode(g_line, n, out, sizeof out, &len);
+        if (rc != DTHC_OK) {
+            printf("ERR %s\n", err_name(rc));
+            return;
+        }
+        printf("RAW ");
+    } else {
+        len = dthc_cobs_encode(g_line, n, out, sizeof out);
+        if (len == 0) {
+            printf("ERR TOO_LONG\n");
+            return;
+        }
+        printf("COBS ");
+    }
+    print_hex(out, len);
+    printf("\n");
+}
+
+int main(void)
+{
+    int c;
+    while ((c = getchar()) != EOF) {
+        long n;
+        if (c == '\n') {
+            continue;
+        }
+        if (c == '#') {
+            skip_line(c);
+            continue;
+        }
+        if (c == 'K') {
+            skip_line(c);
+            print_constants();
+            continue;
+        }
+        if (c == 0 || strchr("FBSCED", c) == NULL) {
+            skip_line(c);
+            printf("ERR SYNTAX\n");
+            continue;
+        }
+        n = read_hex_line();
+        if (n < 0) {
+            printf("ERR SYNTAX\n");
+            continue;
+        }
+        switch (c) {
+        case 'F': cmd_frame((size_t)n); break;
+        case 'B': cmd_body((size_t)n); break;
+        case 'S': cmd_stream((size_t)n); break;
+        case 'C': printf("CRC %04X\n", (unsigned)dthc_crc16(g_line, (size_t)n)); break;
+        case 'E': cmd_cobs(0, (size_t)n); break;
+        default: cmd_cobs(1, (size_t)n); break;
+        }
+        fflush(stdout);
+    }
+    return 0;
+}
