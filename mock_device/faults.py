@@ -1,0 +1,79 @@
+"""Fault injection on the board's link: what a noisy, flaky USB cable does to the bytes.
+
+The injector sits between the firmware and the link. It sees one frame per ``outgoing``
+call (the firmware writes whole frames) and bytes in any split per ``incoming`` call.
+Scheduled faults (unplug, reboot, stalled acks) are read by the process that owns the
+link; everything here is seeded and deterministic.
+"""
+
+from __future__ import annotations
+
+import random
+from dataclasses import dataclass
+
+__all__ = ["FaultPlan", "LinkFaultInjector"]
+
+
+@dataclass(frozen=True)
+class FaultPlan:
+    """Every fault the mock can inject; all off by default."""
+
+    bit_flip_rate: float = 0.0  # probability per byte, both directions
+    drop_frame_rate: float = 0.0  # probability per board frame
+    delay_ms: float = 0.0  # extra latency on every board frame
+    garbage_rate: float = 0.0  # probability per board frame of a garbage burst before it
+    garbage_max_bytes: int = 32
+    unplug_at_s: float | None = None  # close the pty master, recreate it after unplug_for_s
+    unplug_for_s: float = 1.0
+    reboot_at_s: float | None = None  # restart the firmware with a new boot id
+    stall_acks_at_s: float | None = None  # stop answering commands for stall_for_s
+    stall_for_s: float = 0.5
+
+    @property
+    def corrupts_bytes(self) -> bool:
+        return bool(self.bit_flip_rate or self.drop_frame_rate or self.garbage_rate)
+
+
+class LinkFaultInjector:
+    def __init__(self, plan: FaultPlan, rng: random.Random) -> None:
+        self.plan = plan
+        self.rng = rng
+        self.flipped_bits = 0
+        self.dropped_frames = 0
+        self.garbage_bytes = 0
+
+    def _flip(self, data: bytes) -> bytes:
+        rate = self.plan.bit_flip_rate
+        if not rate:
+            return data
+        rng = self.rng
+        out: bytearray | None = None
+        # Geometric skipping: cost proportional to flips, not bytes.
+        pos = -1
+        while True:
+            pos += 1 + int(rng.expovariate(rate)) if rate < 1.0 else 1
+            if pos >= len(data):
+                break
+            if out is None:
+                out = bytearray(data)
+            out[pos] ^= 1 << rng.randrange(8)
+            self.flipped_bits += 1
+        return data if out is None else bytes(out)
+
+    def outgoing(self, frame: bytes) -> bytes:
+        """Board to host: maybe drop the frame, add garbage before it, flip bits in it."""
+        plan = self.plan
+        rng = self.rng
+        if plan.drop_frame_rate and rng.random() < plan.drop_frame_rate:
+            self.dropped_frames += 1
+            return b""
+        prefix = b""
+        if plan.garbage_rate and rng.random() < plan.garbage_rate:
+            n = rng.randint(1, plan.garbage_max_bytes)
+            prefix = bytes(rng.randrange(256) for _ in range(n))
+            self.garbage_bytes += n
+        return prefix + self._flip(frame)
+
+    def incoming(self, data: bytes) -> bytes:
+        """Host to board: bit flips only (the host's own retransmissions cover loss)."""
+        return self._flip(data)

@@ -1,0 +1,167 @@
+"""The mock board as a real-time process: firmware ticks paced by the monotonic clock.
+
+The firmware and plant run in board time; each wake-up runs every tick that is due, then
+flushes what the board sent to the link. Host bytes are handled the moment they arrive,
+and their replies flushed at once, so acknowledgements do not wait for the next batch.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import signal
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import firmware_protocol as fp
+
+from .faults import FaultPlan
+from .links import BoardLink
+from .sim import SimulatedBoard
+
+__all__ = ["MockBoardProcess", "ProcessOptions"]
+
+MAX_TICKS_PER_WAKE = 200  # after a long stall, catch up in slices so the link is served
+
+
+@dataclass(frozen=True)
+class ProcessOptions:
+    duration_s: float | None = None
+    truth_path: Path | None = None
+    program: tuple[str, ...] = ()
+
+
+class MockBoardProcess:
+    def __init__(
+        self, board: SimulatedBoard, link: BoardLink, plan: FaultPlan, options: ProcessOptions
+    ) -> None:
+        self.board = board
+        self.link = link
+        self.plan = plan
+        self.options = options
+        self.stop = asyncio.Event()
+        self.unplugs = 0
+        self.reboots = 0
+        self._unplug_task: asyncio.Task[None] | None = None
+        self._stall_done = False
+        link.on_bytes = self._host_bytes
+
+    def _host_bytes(self, data: bytes) -> None:
+        self.board.host_write(data)
+        self._flush()
+
+    def _flush(self) -> None:
+        data = self.board.read()
+        if not data:
+            return
+        if self.plan.delay_ms:
+            asyncio.get_running_loop().call_later(self.plan.delay_ms / 1000, self.link.write, data)
+        else:
+            self.link.write(data)
+
+    async def unplug(self, for_s: float) -> None:
+        """Close the pty master (the host sees EIO), wait, recreate it behind the same path."""
+        if not self.link.is_open:
+            return
+        self.unplugs += 1
+        self._log("unplug", for_s=for_s)
+        await self.link.close()
+        await asyncio.sleep(for_s)
+        self.board.read()  # what the board sent meanwhile went nowhere
+        await self.link.open()
+        self._log("replug")
+
+    def reboot(self) -> None:
+        self.reboots += 1
+        self.board.reboot()
+        self._log("reboot", boot_id=f"{self.board.firmware.boot_id:08x}")
+
+    def _log(self, event: str, **fields: object) -> None:
+        line = {"event": event, "t_s": round(self.board.t_s, 4), **fields}
+        print(json.dumps(line), file=sys.stderr, flush=True)
+
+    def _scheduled_faults(self) -> None:
+        t = self.board.t_s
+        plan = self.plan
+        if plan.unplug_at_s is not None and t >= plan.unplug_at_s and self.unplugs == 0:
+            self._spawn_unplug(plan.unplug_for_s)
+        if plan.reboot_at_s is not None and t >= plan.reboot_at_s and self.reboots == 0:
+            self.reboot()
+        if plan.stall_acks_at_s is not None and t >= plan.stall_acks_at_s and not self._stall_done:
+            self._stall_done = True
+            fw = self.board.firmware
+            fw.stall_replies_until_us = fw.t_us + round(plan.stall_for_s * 1e6)
+            self._log("stall_acks", for_s=plan.stall_for_s)
+
+    def _spawn_unplug(self, for_s: float) -> None:
+        if self._unplug_task is None or self._unplug_task.done():
+            self._unplug_task = asyncio.create_task(self.unplug(for_s), name="unplug")
+
+    async def run(self) -> int:
+        loop = asyncio.get_running_loop()
+        with contextlib.suppress(NotImplementedError):
+            loop.add_signal_handler(signal.SIGTERM, self.stop.set)
+            loop.add_signal_handler(signal.SIGINT, self.stop.set)
+            loop.add_signal_handler(signal.SIGUSR1, self._spawn_unplug, self.plan.unplug_for_s)
+            loop.add_signal_handler(signal.SIGUSR2, self.reboot)
+        for line in self.options.program:
+            self.board.plant.gantry.feed_line(line)
+        await self.link.open()
+        self._log("ready", link=str(getattr(self.link, "path", "")), boot_id=self.boot_hex)
+        print(f"READY {self.boot_hex}", flush=True)
+        t0 = loop.time()
+        fw_t0_us = self.board.firmware.t_us
+        try:
+            while not self.stop.is_set():
+                fw = self.board.firmware
+                due_us = fw_t0_us + round((loop.time() - t0) * 1e6)
+                ticks = 0
+                while fw.t_us < due_us and ticks < MAX_TICKS_PER_WAKE:
+                    fw.tick()
+                    ticks += 1
+                    fw = self.board.firmware
+                self._flush()
+                self._scheduled_faults()
+                if (
+                    self.options.duration_s is not None
+                    and self.board.t_s >= self.options.duration_s
+                ):
+                    break
+                batch_us = fw.sampling.period_us * fw.sampling.batch_size
+                wake = t0 + (fw.t_us + batch_us - fw_t0_us) / 1e6
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(self.stop.wait(), max(0.0, wake - loop.time()))
+        finally:
+            await self.link.close()
+            if self._unplug_task is not None:
+                self._unplug_task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await self._unplug_task
+            self._finish()
+        return 0
+
+    @property
+    def boot_hex(self) -> str:
+        return f"{self.board.firmware.boot_id:08x}"
+
+    def _finish(self) -> None:
+        truth = self.board.plant.truth
+        if self.options.truth_path is not None:
+            path = self.options.truth_path
+            if path.suffix == ".csv":
+                truth.write_csv(path)
+            else:
+                truth.write_jsonl(path)
+        fw = self.board.firmware
+        self._log(
+            "exit",
+            violations=truth.violations,
+            unplugs=self.unplugs,
+            reboots=self.reboots,
+            rx_crc_errors=fw.decoder.stats.crc_errors,
+            faults=f"0x{fw.faults:04x}",
+            torch_on=fw.torch_on,
+            proto=f"{fp.PROTOCOL_MAJOR}.{fp.PROTOCOL_MINOR}",
+        )

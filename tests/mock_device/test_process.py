@@ -1,0 +1,145 @@
+"""The mock board as its own process on a real pty, seen through pyserial like a USB port."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import serial
+
+import firmware_protocol as fp
+
+pytestmark = pytest.mark.slow
+
+
+def _start(pty: Path, *extra: str) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mock_device", "--pty", str(pty), "--seed", "9", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline()
+    assert line.startswith("READY"), line + proc.stderr.read() if proc.stderr else ""
+    return proc
+
+
+@pytest.fixture
+def mock(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
+    pty = tmp_path / "dthc0"
+    proc = _start(pty, "--unplug-for", "0.5")
+    yield proc, pty
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(5)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+
+
+def _exchange(port: serial.Serial, msg: fp.Message, want: type[fp.Message]) -> fp.Message:
+    decoder = fp.StreamDecoder()
+    port.write(fp.encode(msg))
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        for reply in decoder.feed(port.read(port.in_waiting or 1)):
+            if isinstance(reply, want) and reply.seq == msg.seq:
+                return reply
+    raise AssertionError(f"no {want.__name__} for {msg!r}")
+
+
+def _read_until_error(port: serial.Serial, within_s: float) -> None:
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:
+        port.read(64)
+
+
+def test_handshake_and_samples_over_a_real_pty(
+    mock: tuple[subprocess.Popen[str], Path],
+) -> None:
+    """A pyserial client on the symlinked pty gets HELLO_INFO and a 1 kHz sample stream."""
+    _, pty = mock
+    with serial.Serial(str(pty), timeout=0.05, exclusive=True) as port:
+        info = _exchange(port, fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5), fp.HelloInfo)
+        assert isinstance(info, fp.HelloInfo)
+        assert info.sample_rate_hz == 1000
+        decoder = fp.StreamDecoder()
+        t0 = time.monotonic()
+        batches: list[fp.Samples] = []
+        while time.monotonic() - t0 < 0.5:
+            batches += [m for m in decoder.feed(port.read(512)) if isinstance(m, fp.Samples)]
+        span_us = batches[-1].t0_us - batches[0].t0_us
+        assert len(batches) >= 50
+        assert span_us == (len(batches) - 1) * 5000  # no batch lost on a clean pty
+
+
+def test_unplug_looks_like_a_usb_unplug_and_the_port_comes_back(
+    mock: tuple[subprocess.Popen[str], Path],
+) -> None:
+    """SIGUSR1 closes the pty master: pyserial raises SerialException; later the path reopens."""
+    proc, pty = mock
+    port = serial.Serial(str(pty), timeout=0.2)
+    try:
+        assert port.read(64)
+        proc.send_signal(signal.SIGUSR1)
+        with pytest.raises(serial.SerialException):
+            _read_until_error(port, 2.0)
+    finally:
+        port.close()
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        try:
+            with serial.Serial(str(pty), timeout=0.2) as again:
+                assert again.read(64)
+                return
+        except (serial.SerialException, OSError):
+            time.sleep(0.05)
+    pytest.fail("the pty did not come back behind the same path")
+
+
+def test_lease_expiry_in_the_real_time_process(mock: tuple[subprocess.Popen[str], Path]) -> None:
+    """A host that goes quiet after TORCH on sees LEASE_EXPIRED within lease + one period."""
+    _, pty = mock
+    with serial.Serial(str(pty), timeout=0.02) as port:
+        _exchange(port, fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5), fp.HelloInfo)
+        _exchange(port, fp.SetLease(2, 100), fp.Ack)
+        _exchange(port, fp.Torch(3, True), fp.Ack)
+        decoder = fp.StreamDecoder()
+        fault = None
+        last_torch_on_t = None
+        deadline = time.monotonic() + 2.0
+        while fault is None and time.monotonic() < deadline:
+            for m in decoder.feed(port.read(512)):
+                if isinstance(m, fp.Samples) and m.status & fp.StatusBit.TORCH_ON:
+                    last_torch_on_t = m.t0_us + 4 * m.period_us
+                if isinstance(m, fp.Fault):
+                    fault = m
+        assert isinstance(fault, fp.Fault)
+        assert fault.code == fp.FaultCode.LEASE_EXPIRED
+        assert last_torch_on_t is not None
+        assert fault.t_us - last_torch_on_t <= 1000 + 5000  # within the batch that saw it
+
+
+def test_ground_truth_is_written_on_exit(tmp_path: Path) -> None:
+    """--truth writes the recorded ground truth when the process ends after --duration."""
+    truth = tmp_path / "truth.csv"
+    proc = subprocess.run(
+        [sys.executable, "-m", "mock_device", "--pty", str(tmp_path / "p"), "--duration", "0.3",
+         "--truth", str(truth)],
+        capture_output=True, text=True, timeout=30, check=True,
+    )  # fmt: skip
+    assert proc.stdout.startswith("READY")
+    header, *rows = truth.read_text().splitlines()
+    assert "true_height_mm" in header
+    assert len(rows) >= 250
+    assert not os.path.exists(tmp_path / "p")
