@@ -1,0 +1,59 @@
+"""Bytes to and from one board, whatever the cable: serial/pty, TCP, USB bulk, in-memory.
+
+:func:`open_transport` is the one seam for opening a link::
+
+    transport = await open_transport("/dev/serial/by-id/usb-DTHC_...", on_bytes, on_lost)
+    transport = await open_transport("socket://127.0.0.1:5000", on_bytes, on_lost)
+    transport = await open_transport("usb://1209:d7c0/ABC123", on_bytes, on_lost)
+    transport = await open_transport("memory://board", on_bytes, on_lost)  # tests
+
+Only this package imports pyserial and pyusb (in ``serial.py`` and ``usb.py``).
+"""
+
+from __future__ import annotations
+
+from .base import BytesCallback, LostCallback, Transport, TransportError
+from .memory import open_memory
+from .serial import open_serial
+from .tcp import open_tcp
+from .url import LinkUrl, MemoryUrl, SerialUrl, TcpUrl, UsbUrl, parse_link_url
+from .usb import open_usb
+
+__all__ = [
+    "BytesCallback",
+    "LinkUrl",
+    "LostCallback",
+    "MemoryUrl",
+    "SerialUrl",
+    "TcpUrl",
+    "Transport",
+    "TransportError",
+    "UsbUrl",
+    "open_transport",
+    "parse_link_url",
+]
+
+
+async def open_transport(
+    url: str,
+    on_bytes: BytesCallback,
+    on_lost: LostCallback,
+    *,
+    baudrate: int = 921_600,
+) -> Transport:
+    """Open the link ``url`` names; bytes go to ``on_bytes``, its loss to ``on_lost`` (once).
+
+    Raises ValueError for a malformed URL and TransportError when the link cannot be
+    opened (missing device, port in use, connection refused, no such memory endpoint).
+    ``baudrate`` applies to serial ports only.
+    """
+    link = parse_link_url(url)
+    match link:
+        case SerialUrl(path=path):
+            return await open_serial(path, on_bytes, on_lost, baudrate=baudrate)
+        case TcpUrl():
+            return await open_tcp(url, link, on_bytes, on_lost)
+        case UsbUrl():
+            return await open_usb(url, link, on_bytes, on_lost)
+        case MemoryUrl(name=name):
+            return await open_memory(url, name, on_bytes, on_lost)

@@ -1,0 +1,57 @@
+"""The transport seam: bytes in and out of one board connection, nothing else.
+
+A transport knows nothing of frames. It delivers received bytes to ``on_bytes`` from the
+event loop thread, accepts writes without blocking, and reports its loss exactly once
+through ``on_lost`` (with the exception, or None for a close we asked for). Library errors
+(pyserial, pyusb, OSError) are wrapped in :class:`TransportError` here, at the seam.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+
+__all__ = ["BytesCallback", "LostCallback", "Transport", "TransportError"]
+
+BytesCallback = Callable[[bytes], None]
+LostCallback = Callable[[Exception | None], None]
+
+
+class TransportError(Exception):
+    """Opening, writing to or reading from the board connection failed."""
+
+    def __init__(self, url: str, detail: str) -> None:
+        super().__init__(url, detail)  # args stay (url, detail): the error copies and pickles
+        self.url = url
+        self.detail = detail
+
+    def __str__(self) -> str:
+        return f"{self.url}: {self.detail}"
+
+
+class Transport(abc.ABC):
+    """One open connection to a board. Create with :func:`dthc_bridge.transport.open_transport`."""
+
+    url: str
+
+    @abc.abstractmethod
+    def write(self, data: bytes) -> None:
+        """Queue bytes for sending. Raises TransportError once the loss is known; a write
+        that fails later is reported through ``on_lost`` instead."""
+
+    @abc.abstractmethod
+    async def close(self) -> None:
+        """Close; idempotent. ``on_lost(None)`` is called if it was still open."""
+
+    @property
+    @abc.abstractmethod
+    def is_open(self) -> bool: ...
+
+    async def __aenter__(self) -> Transport:
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.close()
+
+    def discard_output(self) -> None:  # noqa: B027 - optional hook, a no-op by default
+        """Drop bytes queued but not yet sent (before a retransmission), where possible."""
