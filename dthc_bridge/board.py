@@ -1,0 +1,200 @@
+"""BoardClient: the typed async API the plasma controller uses to drive the board.
+
+Units at this level are millimetres, seconds, volts and amperes; the wire's integer units
+stay below it. Telemetry arrives through callbacks (the THC loop, lowest latency) and as
+an async stream (diagnostics, tests).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections import OrderedDict
+from collections.abc import AsyncIterator, Callable
+from typing import Any, TypeVar
+
+import firmware_protocol as fp
+
+from .link import LinkSupervisor, RequestTimeout
+from .link.session import BoardSession
+
+__all__ = ["BoardClient", "Telemetry"]
+
+Telemetry = fp.Samples | fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult
+_Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
+
+SENSOR_OHMIC = 1 << fp.InputBit.OHMIC
+SENSOR_FLOAT = 1 << fp.InputBit.FLOAT
+
+
+def _um(mm: float) -> int:
+    return round(mm * 1000.0)
+
+
+class BoardClient:
+    def __init__(self, supervisor: LinkSupervisor, *, stream_size: int = 1024) -> None:
+        self.link = supervisor
+        self._listeners: list[Callable[[Telemetry], None]] = []
+        self._queues: list[asyncio.Queue[Telemetry]] = []
+        self._stream_size = stream_size
+        # Completions that arrived before anybody waited (an ACK and the report can come in
+        # one read), and waiters keyed by (report type, command seq).
+        self._recent: OrderedDict[tuple[type, int], fp.Message] = OrderedDict()
+        self._waiters: dict[tuple[type, int], asyncio.Future[fp.Message]] = {}
+        self.last_status: fp.Status | None = None
+        supervisor.on_samples = self._on_samples
+        supervisor.on_report = self._on_report
+        supervisor.on_event_gap = self._on_event_gap
+
+    # --- telemetry -------------------------------------------------------------------------
+
+    def add_listener(self, listener: Callable[[Telemetry], None]) -> None:
+        self._listeners.append(listener)
+
+    def _publish(self, item: Telemetry) -> None:
+        for listener in self._listeners:
+            listener(item)
+        for queue in self._queues:
+            if queue.full():
+                queue.get_nowait()  # the stream keeps the newest; counted as a gap upstream
+            queue.put_nowait(item)
+
+    async def telemetry(self) -> AsyncIterator[Telemetry]:
+        """Samples and reports as they arrive (bounded; the oldest are dropped if unread)."""
+        queue: asyncio.Queue[Telemetry] = asyncio.Queue(self._stream_size)
+        self._queues.append(queue)
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            self._queues.remove(queue)
+
+    def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
+        self._publish(batch)
+
+    def _on_report(self, msg: fp.Message) -> None:
+        if isinstance(msg, fp.MotionDone | fp.ProbeResult):
+            key = (type(msg), msg.seq)
+            waiter = self._waiters.pop(key, None)
+            if waiter is not None and not waiter.done():
+                waiter.set_result(msg)
+            else:
+                self._recent[key] = msg
+                while len(self._recent) > 16:
+                    self._recent.popitem(last=False)
+        if isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult):
+            self._publish(msg)
+
+    def _on_event_gap(self, missed: int) -> None:
+        # A lost edge or fault report: learn the current state instead of guessing.
+        asyncio.get_running_loop().create_task(self._refresh_status(), name="status-after-gap")
+
+    async def _refresh_status(self) -> None:
+        try:
+            await self.status()
+        except Exception:  # best effort; the link layer logs its own failures
+            return
+
+    # --- commands --------------------------------------------------------------------------
+
+    def _session(self) -> BoardSession:
+        return self.link.current()
+
+    async def _ack(self, command: fp.Message) -> None:
+        await self._session().request(command)
+
+    async def torch(self, on: bool) -> None:
+        await self._ack(fp.Torch(0, on))
+
+    async def ohmic_sense(self, on: bool) -> None:
+        await self._ack(fp.OhmicSense(0, on))
+
+    async def set_current(self, current_a: float) -> None:
+        await self._ack(fp.SetCurrent(0, round(current_a * 10)))
+
+    async def z_stop(self) -> None:
+        await self._ack(fp.ZStop(0))
+
+    async def fault_reset(self, mask: int = 0xFFFF) -> None:
+        await self._ack(fp.FaultReset(0, mask))
+
+    async def configure(
+        self,
+        *,
+        sample_rate_hz: int = fp.DEFAULT_SAMPLE_RATE_HZ,
+        batch_size: int = fp.DEFAULT_BATCH_SIZE,
+        filter_kind: int = fp.FilterKind.NONE,
+        filter_param: int = 0,
+        arc_lost_ms: int = 0,
+        cal_offset: int = 0,
+        cal_scale: float = 0.01,
+    ) -> None:
+        await self._ack(
+            fp.Configure(
+                0, sample_rate_hz, batch_size, filter_kind, filter_param, arc_lost_ms,
+                cal_offset, cal_scale,
+            )
+        )  # fmt: skip
+
+    async def status(self) -> fp.Status:
+        reply = await self._session().request(fp.Query(0, fp.QueryWhat.STATUS))
+        assert isinstance(reply, fp.Status)
+        self.last_status = reply
+        return reply
+
+    def z_velocity(self, velocity_mm_s: float, expiry_ms: int | None = None) -> None:
+        """THC output: send a Z velocity setpoint now (not acknowledged, expires on the board)."""
+        self._session().send_velocity(_um(velocity_mm_s), expiry_ms)
+
+    async def move_z(
+        self, target_mm: float, feed_mm_s: float, timeout_s: float = 10.0
+    ) -> fp.MotionDone:
+        """Move Z and wait for the board to report the move ended."""
+        return await self._run_until_report(
+            fp.ZMove(0, _um(target_mm), _um(feed_mm_s)), fp.MotionDone,
+            fp.QueryWhat.MOTION_DONE, timeout_s,
+        )  # fmt: skip
+
+    async def probe(
+        self,
+        feed_mm_s: float,
+        max_travel_mm: float,
+        sensors: int = SENSOR_OHMIC | SENSOR_FLOAT,
+        timeout_s: float = 20.0,
+    ) -> fp.ProbeResult:
+        """Probe down; the board stops on contact by itself and reports where."""
+        return await self._run_until_report(
+            fp.ZProbe(0, _um(feed_mm_s), _um(max_travel_mm), sensors), fp.ProbeResult,
+            fp.QueryWhat.PROBE_RESULT, timeout_s,
+        )  # fmt: skip
+
+    async def _run_until_report(
+        self, command: fp.Message, report: type[_Report], what: int, timeout_s: float
+    ) -> _Report:
+        session = self._session()
+        ack = await session.request(command)
+        key = (report, ack.seq)  # the completion carries the seq of the command it ends
+        found = self._recent.pop(key, None)
+        if isinstance(found, report):
+            return found
+        waiter: asyncio.Future[fp.Message] = asyncio.get_running_loop().create_future()
+        self._waiters[key] = waiter
+        try:
+            watched: set[asyncio.Future[Any]] = {waiter, session.lost}
+            done, _ = await asyncio.wait(
+                watched, timeout=timeout_s, return_when=asyncio.FIRST_COMPLETED
+            )
+        finally:
+            self._waiters.pop(key, None)
+        if waiter in done:
+            result = waiter.result()
+            assert isinstance(result, report)
+            return result
+        if session.lost in done:
+            raise session.lost.result()
+        # The completion report may have been lost on the way: if Z has stopped, ask for it.
+        status = await self.status()
+        if not status.status & fp.StatusBit.Z_BUSY:
+            queried = await session.request(fp.Query(0, what))
+            if isinstance(queried, report):
+                return queried._replace(seq=ack.seq)
+        raise RequestTimeout(type(command).__name__, 1, timeout_s)

@@ -1,0 +1,33 @@
+"""The board link: sessions over a transport, reliability, lease, reconnect."""
+
+from __future__ import annotations
+
+from .clock import BoardClock, extend_u32
+from .errors import (
+    BoardRebooted,
+    LinkDown,
+    LinkError,
+    NegativeAck,
+    ProtocolVersionMismatch,
+    RequestTimeout,
+)
+from .session import BoardSession
+from .stats import LinkStats
+from .supervisor import LinkState, LinkSupervisor
+from .timing import LinkTiming
+
+__all__ = [
+    "BoardClock",
+    "BoardRebooted",
+    "BoardSession",
+    "LinkDown",
+    "LinkError",
+    "LinkState",
+    "LinkStats",
+    "LinkSupervisor",
+    "LinkTiming",
+    "NegativeAck",
+    "ProtocolVersionMismatch",
+    "RequestTimeout",
+    "extend_u32",
+]

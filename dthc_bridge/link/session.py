@@ -1,0 +1,333 @@
+"""One connection to a board: handshake, sequenced requests, lease, telemetry.
+
+Host-to-board commands are reliable: a sequence number, a reply future registered before
+the frame is written, bounded retransmission of the same frame. Board-to-host telemetry is
+unreliable and counted. A session lives until its transport is lost, the board reboots, or
+requests time out repeatedly; then every waiter fails with one exception and ``lost``
+resolves. The supervisor opens a new session; a session is never revived.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+import structlog
+
+import firmware_protocol as fp
+
+from ..transport import Transport, TransportError
+from .clock import BoardClock
+from .errors import (
+    BoardRebooted,
+    LinkDown,
+    LinkError,
+    NegativeAck,
+    ProtocolVersionMismatch,
+    RequestTimeout,
+)
+from .stats import LinkStats
+from .timing import LinkTiming
+
+__all__ = ["BoardSession", "ReportCallback", "SamplesCallback", "TransportOpener"]
+
+log = structlog.get_logger("dthc_bridge.link")
+
+SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of sample 0
+ReportCallback = Callable[[fp.Message], None]  # EVENT, FAULT, MOTION_DONE, PROBE_RESULT
+TransportOpener = Callable[
+    [Callable[[bytes], None], Callable[[Exception | None], None]], Awaitable[Transport]
+]
+
+_REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
+_REPORT_REPLY = {fp.QueryWhat.PROBE_RESULT: fp.ProbeResult, fp.QueryWhat.MOTION_DONE: fp.MotionDone}
+
+
+@dataclass(slots=True)
+class _Pending:
+    future: asyncio.Future[fp.Message]
+    command: fp.Message
+    # A Query for a report is answered by that report, which otherwise arrives unsolicited.
+    report_reply: type[fp.Message] | None
+
+
+class BoardSession:
+    def __init__(
+        self,
+        url: str,
+        timing: LinkTiming,
+        stats: LinkStats,
+        *,
+        on_samples: SamplesCallback | None = None,
+        on_report: ReportCallback | None = None,
+        on_event_gap: Callable[[int], None] | None = None,
+    ) -> None:
+        self.url = url
+        self.timing = timing
+        self.stats = stats
+        self.on_samples = on_samples
+        self.on_report = on_report
+        self.on_event_gap = on_event_gap
+        self.decoder = fp.StreamDecoder(on_error=self._on_decode_error)
+        self.clock = BoardClock()
+        self.info: fp.HelloInfo | None = None
+        self.boot_id: int | None = None
+        self._transport: Transport | None = None
+        self._loop = asyncio.get_running_loop()
+        self._pending: dict[int, _Pending] = {}
+        self._window = asyncio.Semaphore(timing.window)
+        self._next_seq = 1
+        self._velocity_seq = 0
+        self._last_tx_s = 0.0
+        self._consecutive_timeouts = 0
+        self._last_sample_seq: int | None = None
+        self._last_event_counter: int | None = None
+        self.lost: asyncio.Future[LinkError] = self._loop.create_future()
+
+    # --- lifetime --------------------------------------------------------------------------
+
+    async def open(self, opener: TransportOpener) -> None:
+        self._transport = await opener(self._on_bytes, self._on_lost)
+        self._write(b"\x00")  # ends any partial frame the board holds
+
+    @property
+    def is_up(self) -> bool:
+        return not self.lost.done()
+
+    def fail(self, error: LinkError) -> None:
+        """Declare the session dead: every waiter gets ``error``; the transport is closed."""
+        if self.lost.done():
+            return
+        self.lost.set_result(error)
+        for pending in self._pending.values():
+            if not pending.future.done():
+                pending.future.set_exception(error)
+        self._pending.clear()
+        if self._transport is not None and self._transport.is_open:
+            self._loop.create_task(self._transport.close(), name="transport-close")
+        log.warning("link_lost", url=self.url, reason=str(error))
+
+    async def close(self) -> None:
+        self.fail(LinkDown("closed by the host"))
+        if self._transport is not None:
+            await self._transport.close()
+
+    def _on_lost(self, exc: Exception | None) -> None:
+        self.fail(LinkDown(str(exc) if exc else "transport closed"))
+
+    def _write(self, data: bytes) -> None:
+        if self._transport is None or self.lost.done():
+            raise self.lost.result() if self.lost.done() else LinkDown("not connected")
+        try:
+            self._transport.write(data)
+        except TransportError as exc:
+            error = LinkDown(str(exc))
+            self.fail(error)
+            raise error from exc
+        self.stats.bytes_out += len(data)
+        self.stats.frames_out += 1
+        self._last_tx_s = self._loop.time()
+
+    # --- requests --------------------------------------------------------------------------
+
+    def _allocate_seq(self) -> int:
+        seq = self._next_seq
+        while seq in self._pending:
+            seq = seq % 255 + 1
+        self._next_seq = seq % 255 + 1
+        return seq
+
+    async def request(self, command: fp.Message, ack_wait_s: float | None = None) -> fp.Message:
+        """Send a sequenced command and return the board's reply; NAK raises NegativeAck."""
+        if self.lost.done():
+            raise self.lost.result()
+        name = type(command).__name__
+        timeout = self.timing.ack_timeout_s if ack_wait_s is None else ack_wait_s
+        async with self._window:
+            seq = self._allocate_seq()
+            command = command._replace(seq=seq)
+            frame = fp.encode(command)
+            future: asyncio.Future[fp.Message] = self._loop.create_future()
+            report_reply = (
+                _REPORT_REPLY.get(fp.QueryWhat(command.what))
+                if isinstance(command, fp.Query) and command.what in _REPORT_REPLY
+                else None
+            )
+            self._pending[seq] = _Pending(future, command, report_reply)
+            self.stats.requests += 1
+            try:
+                reply = await self._send_until_answered(future, frame, name, timeout)
+            finally:
+                self._pending.pop(seq, None)
+        if isinstance(reply, fp.Nak):
+            self.stats.naks += 1
+            if reply.code == fp.NakCode.NO_SESSION and self.boot_id is not None:
+                self.fail(BoardRebooted(self.boot_id, None))
+            raise NegativeAck(name, reply.code, reply.detail)
+        return reply
+
+    async def _send_until_answered(
+        self, future: asyncio.Future[fp.Message], frame: bytes, name: str, per_attempt_s: float
+    ) -> fp.Message:
+        attempts = self.timing.max_attempts
+        for attempt in range(attempts):
+            if attempt:
+                self.stats.retransmits += 1
+            sent_s = self._loop.time()
+            self._write(frame)
+            try:
+                reply = await asyncio.wait_for(asyncio.shield(future), per_attempt_s)
+            except TimeoutError:
+                continue
+            if attempt == 0:  # Karn's rule: a retransmitted request's RTT is ambiguous
+                self.stats.observe_rtt(self._loop.time() - sent_s)
+            self._consecutive_timeouts = 0
+            return reply
+        self.stats.timeouts += 1
+        self._consecutive_timeouts += 1
+        error = RequestTimeout(name, attempts, per_attempt_s)
+        if self._consecutive_timeouts >= self.timing.max_consecutive_timeouts:
+            self.fail(LinkDown(f"{self._consecutive_timeouts} requests in a row unanswered"))
+        raise error
+
+    def send_velocity(self, velocity_um_s: int, expiry_ms: int | None = None) -> None:
+        """THC output: a Z velocity setpoint, unacknowledged, superseded by the next one."""
+        self._velocity_seq = (self._velocity_seq + 1) & 0xFFFF
+        expiry = self.timing.velocity_expiry_ms if expiry_ms is None else expiry_ms
+        self._write(fp.encode(fp.ZVelocity(0, self._velocity_seq, velocity_um_s, expiry)))
+        self.stats.velocity_frames += 1
+
+    @property
+    def velocity_seq(self) -> int:
+        return self._velocity_seq
+
+    # --- handshake, lease, clock -----------------------------------------------------------
+
+    async def handshake(self) -> fp.HelloInfo:
+        hello = fp.Hello(0, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, random.getrandbits(32))
+        info = await self.request(hello, self.timing.handshake_timeout_s)
+        assert isinstance(info, fp.HelloInfo)
+        if info.proto_major != fp.PROTOCOL_MAJOR:
+            error = ProtocolVersionMismatch(
+                (info.proto_major, info.proto_minor), (fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR)
+            )
+            self.fail(error)
+            raise error
+        self.info = info
+        self.boot_id = info.boot_id
+        self.stats.handshakes += 1
+        await self.request(fp.SetLease(0, self.timing.lease_ms))
+        for _ in range(4):
+            await self.sync_clock()
+        log.info(
+            "board_hello",
+            url=self.url,
+            serial=info.serial,
+            boot_id=f"{info.boot_id:08x}",
+            firmware=f"{info.fw_major}.{info.fw_minor}.{info.fw_patch}",
+            protocol=f"{info.proto_major}.{info.proto_minor}",
+            sample_rate_hz=info.sample_rate_hz,
+        )
+        return info
+
+    async def sync_clock(self) -> None:
+        sent_s = self._loop.time()
+        reply = await self.request(fp.ClockQuery(0))
+        assert isinstance(reply, fp.Clock)
+        self.clock.observe(sent_s, self._loop.time(), reply.t_us)
+
+    async def keep_alive(self) -> None:
+        """Renew the lease when idle and keep the clock mapping fresh, until the link dies."""
+        period = self.timing.heartbeat_period_s
+        next_sync = self._loop.time() + self.timing.clock_sync_period_s
+        while not self.lost.done():
+            now = self._loop.time()
+            idle_until = self._last_tx_s + period
+            if now >= next_sync:
+                next_sync = now + self.timing.clock_sync_period_s
+                await self._quietly(self.sync_clock())
+            elif now >= idle_until:
+                await self._quietly(self.request(fp.Heartbeat(0)))
+            else:
+                await asyncio.wait({self.lost}, timeout=min(idle_until, next_sync) - now)
+
+    async def _quietly(self, work: Awaitable[object]) -> None:
+        try:
+            await work
+        except (RequestTimeout, NegativeAck) as exc:
+            log.warning("keep_alive_failed", url=self.url, error=str(exc))
+        except LinkError:
+            pass  # the session is over; the loop condition ends it
+
+    # --- receiving -------------------------------------------------------------------------
+
+    def _on_decode_error(self, error: fp.DecodeError) -> None:
+        log.debug("bad_frame", url=self.url, error=str(error))
+
+    def _on_bytes(self, data: bytes) -> None:
+        for msg in self.decoder.feed(data):
+            cls = type(msg)
+            if cls is fp.Samples:
+                self._on_samples(msg)  # type: ignore[arg-type]
+            elif cls in _REPLY_TYPES:
+                self._on_reply(msg)
+            else:
+                self._on_report(msg)
+
+    def _on_samples(self, batch: fp.Samples) -> None:
+        stats = self.stats
+        stats.telemetry_batches += 1
+        last = self._last_sample_seq
+        if last is not None:
+            gap = (batch.stream_seq - last - 1) & 0xFFFF
+            if gap < 0x8000:
+                stats.telemetry_gaps += gap
+        self._last_sample_seq = batch.stream_seq
+        if self.on_samples is not None:
+            self.on_samples(batch, self.clock.extend(batch.t0_us))
+
+    def _check_boot_id(self, boot_id: int) -> bool:
+        if self.boot_id is not None and boot_id != self.boot_id:
+            self.stats.reboots += 1
+            self.fail(BoardRebooted(self.boot_id, boot_id))
+            return False
+        return True
+
+    def _on_reply(self, msg: fp.Message) -> None:
+        if isinstance(msg, fp.Ack | fp.Nak | fp.Status) and not self._check_boot_id(msg.boot_id):
+            return
+        if isinstance(msg, fp.HelloInfo) and not self._check_boot_id(msg.boot_id):
+            return
+        if isinstance(msg, fp.Clock):
+            self.clock.last_board_us = max(self.clock.last_board_us, msg.t_us)
+        pending = self._pending.get(msg.seq)
+        if pending is None or pending.report_reply is not None:
+            self.stats.duplicate_replies += 1  # a late answer to a retransmitted request
+            return
+        if not pending.future.done():
+            pending.future.set_result(msg)
+
+    def _on_report(self, msg: fp.Message) -> None:
+        pending = self._pending.get(msg.seq) if msg.seq else None
+        if pending is not None and pending.report_reply is type(msg):
+            if not pending.future.done():
+                pending.future.set_result(msg)
+            return
+        if isinstance(msg, fp.Event | fp.Fault):
+            self._count_event(msg.counter)
+        if self.on_report is not None:
+            self.on_report(msg)
+
+    def _count_event(self, counter: int) -> None:
+        last = self._last_event_counter
+        if last is not None:
+            ahead = (counter - last) & 0xFFFFFFFF
+            if ahead == 0 or ahead >= 0x80000000:
+                return  # a FAULT re-report, or older
+            if ahead > 1:
+                self.stats.event_gaps += ahead - 1
+                if self.on_event_gap is not None:
+                    self.on_event_gap(ahead - 1)
+        self._last_event_counter = counter

@@ -1,0 +1,25 @@
+"""Timing constants of the link, named with their units and injectable (tests shrink them)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["LinkTiming"]
+
+
+@dataclass(frozen=True)
+class LinkTiming:
+    ack_timeout_s: float = 0.025  # >= 3x a USB full-speed round trip; raise it on slow UARTs
+    max_attempts: int = 5  # first send + 4 retransmissions (PROTOCOL.md §3)
+    window: int = 8  # sequenced commands in flight
+    lease_ms: int = 250
+    handshake_timeout_s: float = 0.5
+    clock_sync_period_s: float = 0.9839  # odd period: never in step with other periodic work
+    max_consecutive_timeouts: int = 3  # then the link is declared down
+    backoff_initial_s: float = 0.2
+    backoff_max_s: float = 5.0
+    velocity_expiry_ms: int = 20
+
+    @property
+    def heartbeat_period_s(self) -> float:
+        return self.lease_ms / 3000.0
