@@ -96,7 +96,7 @@ class BoardSession:
     def is_up(self) -> bool:
         return not self.lost.done()
 
-    def fail(self, error: LinkError) -> None:
+    def fail(self, error: LinkError, *, expected: bool = False) -> None:
         """Declare the session dead: every waiter gets ``error``; the transport is closed."""
         if self.lost.done():
             return
@@ -107,10 +107,10 @@ class BoardSession:
         self._pending.clear()
         if self._transport is not None and self._transport.is_open:
             self._loop.create_task(self._transport.close(), name="transport-close")
-        log.warning("link_lost", url=self.url, reason=str(error))
+        (log.info if expected else log.warning)("link_lost", url=self.url, reason=str(error))
 
     async def close(self) -> None:
-        self.fail(LinkDown("closed by the host"))
+        self.fail(LinkDown("closed by the host"), expected=True)
         if self._transport is not None:
             await self._transport.close()
 
