@@ -16,6 +16,7 @@ from .links import BoardLink, PtyLink, TcpLink
 from .plant import list_scenarios
 from .process import MockBoardProcess, ProcessOptions
 from .sim import SimulatedBoard
+from .variants import VARIANTS
 
 __all__ = ["build_parser", "main"]
 
@@ -32,6 +33,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1, help="random seed (plant, noise, boot id)")
     p.add_argument("--serial", default="MOCK-0001", help="board serial in HELLO_INFO")
     p.add_argument("--no-xy-speed", action="store_true", help="board without XY speed input")
+    p.add_argument(
+        "--firmware-variant", choices=sorted(VARIANTS), default="good",
+        help="a firmware with one deliberate fault (for conformance tests)",
+    )  # fmt: skip
     p.add_argument("--duration", type=float, help="exit after this many board seconds")
     p.add_argument("--truth", type=Path, help="write ground truth here on exit (.csv/.jsonl)")
     p.add_argument("--program", type=Path, help="G-code whose motion lines the gantry runs")
@@ -76,7 +81,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         identity = BoardIdentity(
             serial=args.serial, capabilities=identity.capabilities & ~Capability.XY_SPEED
         )
-    board = SimulatedBoard(args.scenario, args.seed, identity=identity, faults=plan)
+    board = SimulatedBoard(
+        args.scenario, args.seed, identity=identity, faults=plan,
+        firmware_class=VARIANTS[args.firmware_variant],
+    )  # fmt: skip
     program: tuple[str, ...] = ()
     if args.program:
         program = tuple(args.program.read_text().splitlines())

@@ -41,6 +41,7 @@ class LinkFaultInjector:
         self.flipped_bits = 0
         self.dropped_frames = 0
         self.garbage_bytes = 0
+        self.garbage_bursts = 0
 
     def _flip(self, data: bytes) -> bytes:
         rate = self.plan.bit_flip_rate
@@ -72,6 +73,7 @@ class LinkFaultInjector:
             n = rng.randint(1, plan.garbage_max_bytes)
             prefix = bytes(rng.randrange(256) for _ in range(n))
             self.garbage_bytes += n
+            self.garbage_bursts += 1
         return prefix + self._flip(frame)
 
     def incoming(self, data: bytes) -> bytes:

@@ -186,8 +186,11 @@ class BoardFirmware:
                 )
                 self._send(fp.Nak(seq, self.boot_id, code, 0))
 
+    def _encode(self, msg: fp.Message) -> bytes:
+        return fp.encode(msg)
+
     def _send(self, msg: fp.Message) -> bytes:
-        data = fp.encode(msg)
+        data = self._encode(msg)
         if self.t_us >= self.stall_replies_until_us or isinstance(
             msg, fp.Samples | fp.Event | fp.Fault
         ):
@@ -429,7 +432,6 @@ class BoardFirmware:
                 del self.fault_counter_of[latched]
         if mask & (1 << FaultCode.LEASE_EXPIRED):
             self.lease_expired = False
-            self.lease_violation_counted = False
             self.last_rx_us = self.t_us
         self._ack(msg.seq)
 
@@ -442,6 +444,7 @@ class BoardFirmware:
         plant.step(period_us / 1e6)
         self._inputs_changed(plant.input_bits())
         self._check_safety()
+        self._audit_lease()
         self._check_motion()
         self._sample()
         if self.faults and self.t_us - self.last_fault_report_us >= FAULT_REPORT_PERIOD_US:
@@ -461,16 +464,28 @@ class BoardFirmware:
                 )
             )  # fmt: skip
 
+    def _lease_overdue(self) -> bool:
+        return self.session and self.t_us - self.last_rx_us > self.lease_ms * 1000
+
+    def _check_lease(self) -> None:
+        if not self.lease_expired and self._lease_overdue():
+            self.lease_expired = True
+            self._latch(FaultCode.LEASE_EXPIRED)
+
+    def _audit_lease(self) -> None:
+        """Ground truth, independent of the firmware's own lease logic (which a faulty variant
+        may break): the torch must be off one sample period after the lease ran out."""
+        grace_us = self.lease_ms * 1000 + self.sampling.period_us
+        late = self.session and self.t_us - self.last_rx_us > grace_us
+        if not late:
+            self.lease_violation_counted = False
+        elif self.torch_on and not self.lease_violation_counted:
+            self.lease_violation_counted = True  # once per episode
+            self.plant.count_violation("torch_on_after_lease_expiry")
+
     def _check_safety(self) -> None:
         inputs = self.inputs
-        if self.session and not self.lease_expired:
-            if self.t_us - self.last_rx_us > self.lease_ms * 1000:
-                self.lease_expired = True
-                self._latch(FaultCode.LEASE_EXPIRED)
-        elif self.lease_expired and self.torch_on and not self.lease_violation_counted:
-            # Only a firmware that ignores its lease gets here: count it once per episode.
-            self.lease_violation_counted = True
-            self.plant.count_violation("torch_on_after_lease_expiry")
+        self._check_lease()
         if inputs & (1 << InputBit.BREAKAWAY):
             self._latch(FaultCode.BREAKAWAY)
         if inputs & (1 << InputBit.ESTOP):

@@ -106,3 +106,28 @@ async def test_stalled_acks_are_survived(rig: ProcessRig) -> None:
         await asyncio.sleep(0.02)
     assert rig.supervisor.stats.retransmits >= 1
     assert rig.supervisor.state is LinkState.ONLINE
+
+
+async def test_device_that_appears_later_is_picked_up(tmp_path: Path) -> None:
+    """Started before the board exists (cable not plugged), the link comes up when it does."""
+    pty = tmp_path / "late0"
+    supervisor = LinkSupervisor(str(pty), TIMING)
+    task = asyncio.create_task(supervisor.run(), name="supervisor")
+    proc: subprocess.Popen[str] | None = None
+    try:
+        await asyncio.sleep(0.4)
+        assert supervisor.state is not LinkState.ONLINE
+        assert "No such file" in supervisor.last_error or "could not open" in supervisor.last_error
+        proc = subprocess.Popen(  # noqa: ASYNC220 - the test needs the Popen handle
+            [sys.executable, "-m", "mock_device", "--pty", str(pty)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        session = await supervisor.wait_online(8.0)
+        assert session.info is not None
+    finally:
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        if proc is not None:
+            proc.send_signal(signal.SIGTERM)
+            await asyncio.to_thread(proc.wait, 5)

@@ -208,3 +208,17 @@ async def test_lost_sample_batches_are_counted_as_gaps(rig: Rig) -> None:
     assert stats.telemetry_gaps > 0
     total = stats.telemetry_batches + stats.telemetry_gaps
     assert 0.01 < stats.telemetry_gaps / total < 0.15
+
+
+async def test_telemetry_stream_yields_samples_with_board_order(rig: Rig) -> None:
+    """The async telemetry stream delivers sample batches in stream order."""
+    await rig.supervisor.wait_online(2.0)
+    seqs: list[int] = []
+    stream = rig.client.telemetry()
+    async for item in stream:
+        if isinstance(item, fp.Samples):
+            seqs.append(item.stream_seq)
+        if len(seqs) == 10:
+            break
+    await stream.aclose()
+    assert seqs == [(seqs[0] + i) & 0xFFFF for i in range(10)]
