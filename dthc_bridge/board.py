@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from collections import OrderedDict
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncGenerator, Callable
 from typing import Any, TypeVar
 
 import firmware_protocol as fp
@@ -58,7 +58,7 @@ class BoardClient:
                 queue.get_nowait()  # the stream keeps the newest; counted as a gap upstream
             queue.put_nowait(item)
 
-    async def telemetry(self) -> AsyncIterator[Telemetry]:
+    async def telemetry(self) -> AsyncGenerator[Telemetry, None]:
         """Samples and reports as they arrive (bounded; the oldest are dropped if unread)."""
         queue: asyncio.Queue[Telemetry] = asyncio.Queue(self._stream_size)
         self._queues.append(queue)

@@ -36,10 +36,9 @@ def _crc16_mcrf4xx(data: bytes) -> int:
     # Klipper's "CCITT": reflected, init 0xFFFF; check value 0x6F91. Not the spec's CRC.
     crc = 0xFFFF
     for byte in data:
-        byte ^= crc & 0xFF
-        byte ^= (byte << 4) & 0xFF
-        crc = ((byte << 8) | (crc >> 8)) ^ (byte >> 4) ^ (byte << 3)
-        crc &= 0xFFFF
+        mixed = byte ^ (crc & 0xFF)
+        mixed ^= (mixed << 4) & 0xFF
+        crc = (((mixed << 8) | (crc >> 8)) ^ (mixed >> 4) ^ (mixed << 3)) & 0xFFFF
     return crc
 
 

@@ -113,7 +113,7 @@ async def test_device_that_appears_later_is_picked_up(tmp_path: Path) -> None:
     pty = tmp_path / "late0"
     supervisor = LinkSupervisor(str(pty), TIMING)
     task = asyncio.create_task(supervisor.run(), name="supervisor")
-    proc: subprocess.Popen[str] | None = None
+    proc: subprocess.Popen[bytes] | None = None
     try:
         await asyncio.sleep(0.4)
         assert supervisor.state is not LinkState.ONLINE

@@ -84,3 +84,10 @@ def test_wrong_crc_variant_is_rejected_by_a_conforming_host() -> None:
     decoder = _decode(board, 100)
     assert decoder.stats.frames_ok == 0
     assert decoder.stats.crc_errors == 20
+
+
+def test_wrong_crc_variant_uses_klippers_crc_variant() -> None:
+    """The variant's CRC really is CRC-16/MCRF4XX (check value 0x6F91), not a random one."""
+    from mock_device.variants import _crc16_mcrf4xx
+
+    assert _crc16_mcrf4xx(b"123456789") == 0x6F91
