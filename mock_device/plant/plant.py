@@ -60,6 +60,7 @@ class Plant:
         if isinstance(scenario, str):
             scenario = load_scenario(scenario)
         self.scenario = scenario
+        self._material_feed_mm_s = scenario.material.cut_feed_mm_min / 60.0
         self.seed = seed
         master = random.Random(seed)
         # One stream per component, so e.g. enabling ohmic sensing does not shift the noise.
@@ -158,7 +159,9 @@ class Plant:
             head.true_height_mm,
             self._gap_kind,
             gantry.speed_mm_s,
-            gantry.requested_feed_mm_s,
+            # The arc lengthens below the speed the material is cut at, whatever feed the
+            # program asks for: a hole run at a reduced feed raises the voltage too.
+            self._material_feed_mm_s,
         )
         state = arc.state
         if state is _TRANSFERRED:

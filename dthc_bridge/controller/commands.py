@@ -1,0 +1,216 @@
+"""Typed plasma commands: what the G-code dialects and the MQTT requests turn into.
+
+The controller consumes only these; the dialect parsers (``gcode.py``) and the MQTT
+gateway produce them. Units are in the field names. Parameter objects validate their
+ranges on construction and raise :class:`CommandError` naming the offending word.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+__all__ = [
+    "Command",
+    "CommandError",
+    "CutParams",
+    "CycleStart",
+    "LegacyMode",
+    "OhmicTest",
+    "OperatingMode",
+    "PlasmaMode",
+    "ProbeAndStart",
+    "Rearm",
+    "ResumePoint",
+    "SetCurrent",
+    "SetCutParams",
+    "ThcEnable",
+    "ThcMode",
+    "TorchStart",
+    "TorchStop",
+    "VelocityReduction",
+    "VoltageAdjust",
+    "VoltageMode",
+    "check_range",
+]
+
+
+class CommandError(ValueError):
+    """A command or one of its words is invalid. ``word`` names it (e.g. ``"G200 P"``)."""
+
+    def __init__(self, word: str, reason: str) -> None:
+        super().__init__(f"{word}: {reason}" if word else reason)
+        self.word = word
+        self.reason = reason
+
+
+def check_range(word: str, value: float, low: float, high: float) -> float:
+    if not low <= value <= high:
+        raise CommandError(word, f"{value:g} is out of range {low:g}..{high:g}")
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class CutParams:
+    """MASSO G200 F P D C V A O S, and the same set from other dialects."""
+
+    touch_feed_mm_min: float = 200.0  # F: probing feed
+    pierce_height_mm: float = 3.8  # P
+    pierce_delay_ms: float = 500.0  # D (MASSO gives milliseconds)
+    cut_height_mm: float = 1.5  # C
+    cut_voltage_v: float | None = None  # V; None (V0) = auto voltage, sampled per cut
+    anti_dive_percent: float = 90.0  # A; 0 = velocity anti-dive off
+    ohmic: bool = False  # O1 = ohmic touch-off, O0 = float switch ("plasma touch")
+    stop_after_pierce: bool = False  # S1 = stop after pierce, wait for cycle start
+
+    def __post_init__(self) -> None:
+        check_range("G200 F", self.touch_feed_mm_min, 1.0, 3000.0)
+        check_range("G200 P", self.pierce_height_mm, 0.5, 25.0)
+        check_range("G200 D", self.pierce_delay_ms, 0.0, 10_000.0)
+        check_range("G200 C", self.cut_height_mm, 0.2, 10.0)
+        if self.cut_voltage_v is not None:
+            check_range("G200 V", self.cut_voltage_v, 50.0, 300.0)
+        check_range("G200 A", self.anti_dive_percent, 0.0, 100.0)
+
+
+class ThcMode(IntEnum):
+    """LinuxCNC PlasmaC operating modes."""
+
+    VOLTAGE_ONLY = 0  # arc OK derived from the arc voltage, voltage THC
+    ARC_OK_AND_VOLTAGE = 1  # arc-OK input, voltage THC
+    ARC_OK_AND_UPDOWN = 2  # arc-OK input, THC from an external box's up/down outputs
+
+
+@dataclass(frozen=True, slots=True)
+class PlasmaMode:
+    """T112 M6 enters plasma mode; any other tool leaves it."""
+
+    tool: int
+
+    @property
+    def enabled(self) -> bool:
+        return self.tool == 112
+
+
+@dataclass(frozen=True, slots=True)
+class SetCutParams:
+    """G200 with parameters: sets (and overwrites) the cut parameters; G200 mode active."""
+
+    params: CutParams
+
+
+@dataclass(frozen=True, slots=True)
+class LegacyMode:
+    """G200 with no parameters: no automatic sequence, everything by G-code."""
+
+
+@dataclass(frozen=True, slots=True)
+class TorchStart:
+    """M3: with G200 active, the automatic start sequence; answered when XY may move."""
+
+
+@dataclass(frozen=True, slots=True)
+class TorchStop:
+    """M5: torch off, then safe height."""
+
+
+@dataclass(frozen=True, slots=True)
+class ThcEnable:
+    """M667 [F] / M666; G100 P7 A1/A0; PlasmaC M63/M65 P2 (on), M62/M64 P2 (off)."""
+
+    enabled: bool
+    z_feed_mm_min: float | None = None  # M667 F, remembered until overwritten
+    synchronized: bool = False  # PlasmaC M62/M63: with the next motion; M64/M65: at once
+
+
+@dataclass(frozen=True, slots=True)
+class VoltageAdjust:
+    """Torch up / torch down during a cut: the target voltage moves by ``delta_v``."""
+
+    delta_v: float
+
+
+@dataclass(frozen=True, slots=True)
+class ResumePoint:
+    """RosettaCNC G100 P0: a safe start/resume point; its track is recorded and published."""
+
+    line: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SetCurrent:
+    """RosettaCNC G100 P4 A: plasma current set point."""
+
+    current_a: float
+
+
+@dataclass(frozen=True, slots=True)
+class VoltageMode:
+    """RosettaCNC G100 P5: A0 B<volts> fixed, A1 auto-acquired after torch activation."""
+
+    auto: bool
+    volts: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ProbeAndStart:
+    """RosettaCNC G100 P6 A B C D E F H [I]: probe, pierce, start, optionally THC."""
+
+    z_feed_mm_min: float  # A
+    touch_target_z_mm: float  # B: probe no further than this machine Z
+    touch_feed_mm_min: float  # C
+    pierce_height_mm: float  # D
+    pierce_delay_s: float  # E
+    arc_ok_timeout_s: float  # F
+    cut_height_mm: float  # H
+    mode: int = 0  # I: 0 probe+THC (comparator off until P7 A1), 1 no THC, 2 reset, 3 set
+
+
+@dataclass(frozen=True, slots=True)
+class OperatingMode:
+    """LinuxCNC PlasmaC operating mode 0, 1 or 2."""
+
+    mode: ThcMode
+
+
+@dataclass(frozen=True, slots=True)
+class VelocityReduction:
+    """PlasmaC M67/M68 E3 Q: run the cut at Q percent of the programmed feed."""
+
+    percent: float
+    synchronized: bool = True  # M67 with motion, M68 at once
+
+
+@dataclass(frozen=True, slots=True)
+class CycleStart:
+    """The operator's cycle start (resumes an S1 stop after pierce)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Rearm:
+    """Leave the faulted state after an error has been seen (touch-off follows)."""
+
+
+@dataclass(frozen=True, slots=True)
+class OhmicTest:
+    """Switch ohmic sensing on with the torch in the air: contact means a shorted torch."""
+
+
+Command = (
+    PlasmaMode
+    | SetCutParams
+    | LegacyMode
+    | TorchStart
+    | TorchStop
+    | ThcEnable
+    | VoltageAdjust
+    | ResumePoint
+    | SetCurrent
+    | VoltageMode
+    | ProbeAndStart
+    | OperatingMode
+    | VelocityReduction
+    | CycleStart
+    | Rearm
+    | OhmicTest
+)

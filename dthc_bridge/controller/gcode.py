@@ -1,0 +1,612 @@
+"""G-code lines and MQTT requests into the typed plasma commands of :mod:`.commands`.
+
+The G-code sender sends us single lines. :func:`parse_line` splits one line into the plasma
+commands it carries (in line order) and whatever is left for the motion backend; the
+structured MQTT requests that are not G-code go through :func:`parse_request`. Both are
+pure and stateless, and every problem is a :class:`~.commands.CommandError` naming the
+offending word (``"G200 Q: unknown parameter"``, ``"G100 P6 H: required parameter is
+missing"``).
+
+Dialects understood:
+
+* MASSO (v5 / DTHC): ``T112 M6`` (``M6`` with any other tool leaves plasma mode),
+  ``G200 F P D C V A O S`` (cut parameters; bare ``G200`` = legacy mode), ``M3``/``M03``,
+  ``M5``/``M05``, ``M667 [F]`` (THC on, F = Z feed while under THC), ``M666`` (THC off).
+* RosettaCNC ``G100 P<n>``: P0 resume point, P4 current, P5 voltage mode, P6 probe and
+  start, P7 THC comparator on/off. P1, P2, P3, P8 and P1000 are machine functions, not
+  plasma ones, and are refused.
+* LinuxCNC PlasmaC: ``M62``/``M64 P2`` THC off, ``M63``/``M65 P2`` THC on (62/63 with the
+  next motion, 64/65 at once); ``M67``/``M68 E3 Q<n>`` velocity reduction to n percent
+  (67 with the next motion, 68 at once).
+
+Choices made where the source documents are silent or ambiguous:
+
+* Tokens: a word is a letter (either case) and a number with optional sign and decimals;
+  blanks between words, and between a letter and its number, are optional. ``(...)`` and
+  ``;`` comments are removed and kept in :attr:`ParsedLine.comment` (several are joined with
+  ``"; "``). Anything else (``#1``, ``[...]``, ``/``, ``=``) is refused; a line holding only
+  ``%`` (the program delimiter) is empty.
+* Which command a parameter word belongs to: the G or M word before it; words before the
+  first G/M word belong to the first one (so ``F600 M667`` is ``M667 F600``). A plasma
+  command refuses any word it does not take, which keeps mixed lines honest
+  (``G200 X5`` and ``X5 G200`` are errors, ``G1 X5 M3`` is motion plus a torch start). On a
+  line with ``M6`` the one ``T`` word belongs to ``M6`` wherever it stands; a ``T`` on a line
+  without ``M6`` is passed to the motion backend untouched.
+* ``G200`` with some parameters: each missing one takes the :class:`~.commands.CutParams`
+  default, not the value of an earlier ``G200`` (the parser is stateless and MASSO says a new
+  G200 overwrites the previous settings). ``V0`` is auto voltage (``cut_voltage_v=None``),
+  O and S must be 0 or 1. Ranges are checked by ``CutParams``.
+* ``M667 F`` must be > 0. ``M667``/``M666`` give ``synchronized=False`` (the default).
+* RosettaCNC ``G100 P6``: E (piercing delay) and F (arc-OK timeout) are in **seconds**, the
+  unit RosettaCNC uses for its dwell. A, C (feeds), D, H (heights) and F must be > 0, E >= 0;
+  B is a machine Z coordinate and may have any sign. I is 0..3, default 0.
+* ``G100 P4 A`` (amperes) is > 0 and <= 400. ``G100 P5 A0 B`` needs B in the ``G200 V``
+  range (50..300 V); with ``A1`` a B word is accepted and ignored, as RosettaCNC does.
+  ``G100 P7`` gives an unsynchronized :class:`~.commands.ThcEnable` (RosettaCNC stops motion
+  for it by default).
+* ``G100 P0``: the :class:`~.commands.ResumePoint` line is the ``line_number`` argument (the
+  sender's own position in its file, unique by construction) when given, else the line's N
+  word. :attr:`ParsedLine.line_number` is the N word when present, else the argument.
+* ``M67``/``M68``: Q must be 0..100; the value is passed through (PlasmaC reads <= 0 as 100 %).
+  ``M62``-``M65`` with P1 (arc-OK ignore), P3 (torch disable) or any other output than P2
+  are refused, as is ``M67``/``M68`` with any E but 3.
+* Requests: ``torch_up``/``torch_down`` take an optional ``volts`` step (default 1 V, > 0 and
+  <= :data:`MAX_VOLTAGE_STEP_V`); ``velocity_reduction`` is immediate (``synchronized=False``);
+  the envelope keys ``transaction`` and ``deadline_ms`` are ignored, any other unknown key is
+  an error.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from .commands import (
+    Command,
+    CommandError,
+    CutParams,
+    CycleStart,
+    LegacyMode,
+    OhmicTest,
+    OperatingMode,
+    PlasmaMode,
+    ProbeAndStart,
+    Rearm,
+    ResumePoint,
+    SetCurrent,
+    SetCutParams,
+    ThcEnable,
+    ThcMode,
+    TorchStart,
+    TorchStop,
+    VelocityReduction,
+    VoltageAdjust,
+    VoltageMode,
+    check_range,
+)
+
+__all__ = [
+    "MAX_VOLTAGE_STEP_V",
+    "REQUEST_NAMES",
+    "ParsedLine",
+    "parse_line",
+    "parse_request",
+]
+
+MAX_VOLTAGE_STEP_V = 50.0
+"""Largest torch up/down step one request may ask for."""
+
+PLASMA_TOOL = 112
+"""MASSO's plasma tool number (``T112 M6``)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ParsedLine:
+    """One G-code line, split.
+
+    ``commands`` are the plasma commands in execution (= line) order; ``motion`` is the rest
+    of the line for the motion backend, or None when nothing is left: its words exactly as
+    written, without the N word, comments and plasma words (adjacent words keep the spacing
+    they had; one blank joins what was on either side of a removed word or comment);
+    ``line_number`` is the N word, else the caller's ``line_number``; ``comment`` is the
+    comment text, if any.
+    """
+
+    commands: tuple[Command, ...] = ()
+    motion: str | None = None
+    line_number: int | None = None
+    comment: str | None = None
+
+
+# --------------------------------------------------------------------------- tokens
+
+
+@dataclass(frozen=True, slots=True)
+class _Word:
+    letter: str  # upper case
+    number: str  # the number as written; "" when the letter has none
+    index: int  # position among the line's tokens (words and comments)
+    start: int  # the word as written is line[start:end]
+    end: int
+
+
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
+_NUMBER_CHARS = frozenset("+-.0123456789")
+_BLANKS = frozenset(" \t\r\n\f\v")
+
+
+def _is_letter(ch: str) -> bool:
+    return ch.isascii() and ch.isalpha()
+
+
+def _lex(line: str) -> tuple[list[_Word], list[str]]:
+    """Words and comments of ``line``; refuses stray characters and numbers without letters."""
+    words: list[_Word] = []
+    comments: list[str] = []
+    tokens = 0
+    i, n = 0, len(line)
+    while i < n:
+        ch = line[i]
+        if ch in _BLANKS:
+            i += 1
+        elif ch == "(":
+            end = line.find(")", i + 1)
+            if end < 0:
+                raise CommandError("(", "comment is not closed with ')'")
+            comments.append(line[i + 1 : end].strip())
+            tokens += 1
+            i = end + 1
+        elif ch == ";":
+            comments.append(line[i + 1 :].strip())
+            break
+        elif _is_letter(ch):
+            j = i + 1
+            while j < n and line[j] in " \t":
+                j += 1
+            k = j
+            while k < n and line[k] in _NUMBER_CHARS:
+                k += 1
+            end = k if k > j else i + 1
+            words.append(_Word(ch.upper(), line[j:k], tokens, i, end))
+            tokens += 1
+            i = end
+        elif ch in _NUMBER_CHARS:
+            k = i
+            while k < n and line[k] in _NUMBER_CHARS:
+                k += 1
+            raise CommandError(line[i:k], "number without a letter")
+        elif ch == ")":
+            raise CommandError(")", "')' without '('")
+        else:
+            raise CommandError(ch if ch.isprintable() else repr(ch), "unexpected character")
+    return words, comments
+
+
+def _value(name: str, word: _Word) -> float:
+    """The number of ``word``; errors are named ``name``."""
+    if not word.number:
+        raise CommandError(name, "missing value")
+    if _NUMBER.fullmatch(word.number) is None:
+        raise CommandError(name, f"malformed number {word.number!r}")
+    value = float(word.number)
+    if not math.isfinite(value):
+        raise CommandError(name, "number is too large")
+    return value
+
+
+def _whole(name: str, value: float) -> int:
+    if not value.is_integer():
+        raise CommandError(name, f"{value:g} is not a whole number")
+    return int(value)
+
+
+# --------------------------------------------------------------------------- parameters
+
+
+class _Params:
+    """The parameter words of one plasma command, checked against what it takes."""
+
+    def __init__(self, command: str, words: Sequence[_Word], allowed: str) -> None:
+        self.command = command
+        self.values: dict[str, float] = {}
+        for word in words:
+            name = self.name(word.letter)
+            if word.letter not in allowed:
+                raise CommandError(name, "unknown parameter")
+            if word.letter in self.values:
+                raise CommandError(name, "duplicate parameter")
+            self.values[word.letter] = _value(name, word)
+
+    def name(self, letter: str) -> str:
+        return f"{self.command} {letter}"
+
+    def get(self, letter: str) -> float | None:
+        return self.values.get(letter)
+
+    def require(self, letter: str) -> float:
+        value = self.values.get(letter)
+        if value is None:
+            raise CommandError(self.name(letter), "required parameter is missing")
+        return value
+
+    def positive(self, letter: str) -> float:
+        value = self.require(letter)
+        if value <= 0:
+            raise CommandError(self.name(letter), f"{value:g} must be greater than 0")
+        return value
+
+    def non_negative(self, letter: str) -> float:
+        value = self.require(letter)
+        if value < 0:
+            raise CommandError(self.name(letter), f"{value:g} must not be negative")
+        return value
+
+    def choice(self, letter: str, choices: Sequence[int]) -> int:
+        value = self.require(letter)
+        if value not in choices:
+            allowed = ", ".join(str(c) for c in choices[:-1]) + f" or {choices[-1]}"
+            raise CommandError(self.name(letter), f"{value:g} must be {allowed}")
+        return int(value)
+
+
+def _single(command: str, letter: str, words: Sequence[_Word]) -> tuple[_Word | None, list[_Word]]:
+    """Split the one ``letter`` word (refusing a second) from the other words."""
+    found = [w for w in words if w.letter == letter]
+    if len(found) > 1:
+        raise CommandError(f"{command} {letter}", "duplicate parameter")
+    return (found[0] if found else None), [w for w in words if w.letter != letter]
+
+
+# --------------------------------------------------------------------------- MASSO
+
+
+def _g200(words: Sequence[_Word], _line: int | None) -> Command:
+    p = _Params("G200", words, "FPDCVAOS")
+    if not p.values:
+        return LegacyMode()
+    default = CutParams()
+
+    def get(letter: str, fallback: float) -> float:
+        value = p.get(letter)
+        return fallback if value is None else value
+
+    voltage = p.get("V")
+    return SetCutParams(
+        CutParams(
+            touch_feed_mm_min=get("F", default.touch_feed_mm_min),
+            pierce_height_mm=get("P", default.pierce_height_mm),
+            pierce_delay_ms=get("D", default.pierce_delay_ms),
+            cut_height_mm=get("C", default.cut_height_mm),
+            cut_voltage_v=default.cut_voltage_v if voltage is None else (voltage or None),
+            anti_dive_percent=get("A", default.anti_dive_percent),
+            ohmic=bool(p.choice("O", (0, 1))) if "O" in p.values else default.ohmic,
+            stop_after_pierce=(
+                bool(p.choice("S", (0, 1))) if "S" in p.values else default.stop_after_pierce
+            ),
+        )
+    )
+
+
+def _m3(words: Sequence[_Word], _line: int | None) -> Command:
+    _Params("M3", words, "")
+    return TorchStart()
+
+
+def _m5(words: Sequence[_Word], _line: int | None) -> Command:
+    _Params("M5", words, "")
+    return TorchStop()
+
+
+def _m666(words: Sequence[_Word], _line: int | None) -> Command:
+    _Params("M666", words, "")
+    return ThcEnable(False)
+
+
+def _m667(words: Sequence[_Word], _line: int | None) -> Command:
+    p = _Params("M667", words, "F")
+    return ThcEnable(True, z_feed_mm_min=p.positive("F") if "F" in p.values else None)
+
+
+def _m6(words: Sequence[_Word], _line: int | None) -> Command:
+    p = _Params("M6", words, "T")
+    tool = _whole(p.name("T"), p.require("T"))
+    if tool < 0:
+        raise CommandError(p.name("T"), f"{tool} is not a tool number")
+    return PlasmaMode(tool)
+
+
+# --------------------------------------------------------------------------- RosettaCNC G100
+
+_G100_NOT_PLASMA = {
+    1: "go to a position",
+    2: "axis-free movement",
+    3: "continuous axis movement",
+    8: "lube request",
+    1000: "Modbus shared area",
+}
+
+
+def _g100(words: Sequence[_Word], line: int | None) -> Command:
+    p_word, rest = _single("G100", "P", words)
+    if p_word is None:
+        raise CommandError("G100 P", "required parameter is missing (selects the function)")
+    function = _whole("G100 P", _value("G100 P", p_word))
+    command = f"G100 P{function}"
+    if function in _G100_NOT_PLASMA:
+        raise CommandError(command, f"not a plasma function: {_G100_NOT_PLASMA[function]}")
+    if function == 0:
+        _Params(command, rest, "")
+        return ResumePoint(line)
+    if function == 4:
+        p = _Params(command, rest, "A")
+        return SetCurrent(check_range(p.name("A"), p.positive("A"), 0.0, 400.0))
+    if function == 5:
+        p = _Params(command, rest, "AB")
+        if p.choice("A", (0, 1)) == 1:
+            return VoltageMode(True)
+        return VoltageMode(False, check_range(p.name("B"), p.require("B"), 50.0, 300.0))
+    if function == 6:
+        p = _Params(command, rest, "ABCDEFHI")
+        return ProbeAndStart(
+            z_feed_mm_min=p.positive("A"),
+            touch_target_z_mm=p.require("B"),
+            touch_feed_mm_min=p.positive("C"),
+            pierce_height_mm=p.positive("D"),
+            pierce_delay_s=p.non_negative("E"),
+            arc_ok_timeout_s=p.positive("F"),
+            cut_height_mm=p.positive("H"),
+            mode=p.choice("I", (0, 1, 2, 3)) if "I" in p.values else 0,
+        )
+    if function == 7:
+        p = _Params(command, rest, "A")
+        return ThcEnable(bool(p.choice("A", (0, 1))))
+    raise CommandError(command, "unknown G100 function")
+
+
+# --------------------------------------------------------------------------- LinuxCNC PlasmaC
+
+_PLASMAC_OUTPUTS = {1: "arc-OK ignore", 3: "torch disable for over-cut"}
+
+
+def _thc_output(code: int) -> Callable[[Sequence[_Word], int | None], Command]:
+    """M62/M64 P2 (THC off) and M63/M65 P2 (THC on); 62/63 wait for the next motion."""
+    command = f"M{code}"
+
+    def parse(words: Sequence[_Word], _line: int | None) -> Command:
+        p = _Params(command, words, "P")
+        output = _whole(p.name("P"), p.require("P"))
+        if output != 2:
+            what = _PLASMAC_OUTPUTS.get(output, "digital output")
+            raise CommandError(
+                f"{command} P{output}", f"not a plasma function of ours ({what}); only P2 (THC)"
+            )
+        return ThcEnable(enabled=code in (63, 65), synchronized=code in (62, 63))
+
+    return parse
+
+
+def _velocity_reduction(code: int) -> Callable[[Sequence[_Word], int | None], Command]:
+    """M67 (with the next motion) / M68 (at once) E3 Q<percent>."""
+    command = f"M{code}"
+
+    def parse(words: Sequence[_Word], _line: int | None) -> Command:
+        p = _Params(command, words, "EQ")
+        channel = _whole(p.name("E"), p.require("E"))
+        if channel != 3:
+            raise CommandError(
+                f"{command} E{channel}", "not a plasma function of ours; only E3 (velocity)"
+            )
+        percent = check_range(p.name("Q"), p.require("Q"), 0.0, 100.0)
+        return VelocityReduction(percent, synchronized=code == 67)
+
+    return parse
+
+
+# --------------------------------------------------------------------------- lines
+
+_Handler = Callable[[Sequence[_Word], int | None], Command]
+
+_PLASMA_G: dict[float, tuple[str, _Handler]] = {
+    100.0: ("G100", _g100),
+    200.0: ("G200", _g200),
+}
+_PLASMA_M: dict[float, tuple[str, _Handler]] = {
+    3.0: ("M3", _m3),
+    5.0: ("M5", _m5),
+    6.0: ("M6", _m6),
+    62.0: ("M62", _thc_output(62)),
+    63.0: ("M63", _thc_output(63)),
+    64.0: ("M64", _thc_output(64)),
+    65.0: ("M65", _thc_output(65)),
+    67.0: ("M67", _velocity_reduction(67)),
+    68.0: ("M68", _velocity_reduction(68)),
+    666.0: ("M666", _m666),
+    667.0: ("M667", _m667),
+}
+
+
+@dataclass(slots=True)
+class _Group:
+    head: _Word | None  # the G/M word; None only for a line without any
+    handler: _Handler | None  # None: not a plasma command, the words go to motion
+    params: list[_Word]
+
+
+def _classify(word: _Word) -> tuple[str, _Handler] | None:
+    table = _PLASMA_G if word.letter == "G" else _PLASMA_M
+    return table.get(_value(word.letter, word))
+
+
+def _motion_text(line: str, words: Sequence[_Word]) -> str | None:
+    """The kept words as written: runs of adjacent words verbatim, runs joined by one blank."""
+    runs: list[str] = []
+    first = previous = None
+    for word in words:
+        if previous is None or word.index != previous.index + 1:
+            if first is not None and previous is not None:
+                runs.append(line[first.start : previous.end])
+            first = word
+        previous = word
+    if first is not None and previous is not None:
+        runs.append(line[first.start : previous.end])
+    return " ".join(runs) or None
+
+
+def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
+    """Split one G-code line into plasma commands, motion text, line number and comment.
+
+    ``line_number`` is the caller's position of the line (used when the line has no N word,
+    and for ``G100 P0`` resume points). Raises :class:`CommandError` naming the word.
+    """
+    if line.strip() == "%":
+        return ParsedLine(line_number=line_number)
+    words, comments = _lex(line)
+
+    number_words = [w for w in words if w.letter == "N"]
+    if len(number_words) > 1:
+        raise CommandError("N", "more than one line number")
+    n_word: int | None = None
+    if number_words:
+        n_word = _whole("N", _value("N", number_words[0]))
+        if n_word < 0:
+            raise CommandError("N", f"{n_word} is not a line number")
+    words = [w for w in words if w.letter != "N"]
+
+    heads = {w.index: _classify(w) for w in words if w.letter in "GM"}
+    tool_changes = [i for i, kind in heads.items() if kind is not None and kind[0] == "M6"]
+    if len(tool_changes) > 1:
+        raise CommandError("M6", "more than one tool change on the line")
+    tool_word: _Word | None = None
+    if tool_changes:
+        tool_word, words = _single("M6", "T", words)
+
+    leading: list[_Word] = []
+    groups: list[_Group] = []
+    for word in words:
+        if word.index in heads:
+            kind = heads[word.index]
+            groups.append(_Group(word, None if kind is None else kind[1], []))
+        elif groups:
+            groups[-1].params.append(word)
+        else:
+            leading.append(word)
+    if groups:
+        groups[0].params[:0] = leading
+    elif leading:
+        groups.append(_Group(None, None, leading))
+
+    commands: list[Command] = []
+    motion: list[_Word] = []
+    resume_line = line_number if line_number is not None else n_word
+    for group in groups:
+        if group.handler is None:
+            for word in group.params:
+                _value(word.letter, word)
+            motion.extend(group.params)
+            if group.head is not None:
+                motion.append(group.head)
+        else:
+            params = group.params
+            if (
+                group.head is not None
+                and tool_word is not None
+                and group.head.index in tool_changes
+            ):
+                params = [tool_word, *params]
+            commands.append(group.handler(params, resume_line))
+    motion.sort(key=lambda w: w.index)
+
+    return ParsedLine(
+        commands=tuple(commands),
+        motion=_motion_text(line, motion),
+        line_number=n_word if n_word is not None else line_number,
+        comment="; ".join(comments) if comments else None,
+    )
+
+
+# --------------------------------------------------------------------------- MQTT requests
+
+_ENVELOPE_KEYS = frozenset({"transaction", "deadline_ms"})
+
+
+def _arg_number(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise CommandError(name, f"{value!r} is not a number")
+    result = float(value)
+    if not math.isfinite(result):
+        raise CommandError(name, f"{value!r} is not a finite number")
+    return result
+
+
+def _voltage_step(sign: float) -> Callable[[str, Mapping[str, object]], Command]:
+    def parse(name: str, args: Mapping[str, object]) -> Command:
+        volts = _arg_number(f"{name} volts", args.get("volts", 1.0))
+        if not 0 < volts <= MAX_VOLTAGE_STEP_V:
+            raise CommandError(
+                f"{name} volts", f"{volts:g} is out of range (0..{MAX_VOLTAGE_STEP_V:g}]"
+            )
+        return VoltageAdjust(sign * volts)
+
+    return parse
+
+
+def _cycle_start(_name: str, _args: Mapping[str, object]) -> Command:
+    return CycleStart()
+
+
+def _rearm(_name: str, _args: Mapping[str, object]) -> Command:
+    return Rearm()
+
+
+def _ohmic_test(_name: str, _args: Mapping[str, object]) -> Command:
+    return OhmicTest()
+
+
+def _operating_mode(name: str, args: Mapping[str, object]) -> Command:
+    if "mode" not in args:
+        raise CommandError(f"{name} mode", "required argument is missing")
+    mode = _arg_number(f"{name} mode", args["mode"])
+    if mode not in (0, 1, 2):
+        raise CommandError(f"{name} mode", f"{mode:g} must be 0, 1 or 2")
+    return OperatingMode(ThcMode(int(mode)))
+
+
+def _request_velocity_reduction(name: str, args: Mapping[str, object]) -> Command:
+    if "percent" not in args:
+        raise CommandError(f"{name} percent", "required argument is missing")
+    percent = _arg_number(f"{name} percent", args["percent"])
+    return VelocityReduction(
+        check_range(f"{name} percent", percent, 0.0, 100.0), synchronized=False
+    )
+
+
+_REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]], Command]]] = {
+    "torch_up": (frozenset({"volts"}), _voltage_step(+1.0)),
+    "torch_down": (frozenset({"volts"}), _voltage_step(-1.0)),
+    "cycle_start": (frozenset(), _cycle_start),
+    "rearm": (frozenset(), _rearm),
+    "ohmic_test": (frozenset(), _ohmic_test),
+    "operating_mode": (frozenset({"mode"}), _operating_mode),
+    "velocity_reduction": (frozenset({"percent"}), _request_velocity_reduction),
+}
+
+REQUEST_NAMES = frozenset(_REQUESTS)
+"""The request names :func:`parse_request` understands."""
+
+
+def parse_request(name: str, args: Mapping[str, object]) -> Command:
+    """The command of one MQTT request (``thc/<id>/request/<name>`` with JSON ``args``).
+
+    Raises :class:`CommandError` for an unknown name, an unknown or missing argument, or a
+    bad value; the error's word is ``"<name> <argument>"``.
+    """
+    entry = _REQUESTS.get(name)
+    if entry is None:
+        raise CommandError(name or "request", "unknown request")
+    allowed, parse = entry
+    for key in args:
+        if key not in allowed and key not in _ENVELOPE_KEYS:
+            raise CommandError(f"{name} {key}", "unknown argument")
+    return parse(name, args)

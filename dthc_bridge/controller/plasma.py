@@ -1,0 +1,138 @@
+"""PlasmaController: applies typed commands to the cut sequence (pure, no I/O).
+
+One place decides what each command does in each state, so G-code over MQTT, structured
+requests and tests all behave alike. A command either completes at once (``Outcome``), is
+answered later by the sequence (``deferred``: M3 when XY may move, M5 at safe height), or
+is refused with a :class:`CommandError` that changes nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from . import actions as act
+from .commands import (
+    Command,
+    CommandError,
+    CycleStart,
+    LegacyMode,
+    OhmicTest,
+    OperatingMode,
+    PlasmaMode,
+    ProbeAndStart,
+    Rearm,
+    ResumePoint,
+    SetCurrent,
+    SetCutParams,
+    ThcEnable,
+    TorchStart,
+    TorchStop,
+    VelocityReduction,
+    VoltageAdjust,
+    VoltageMode,
+)
+from .sequence import CutSequence, State
+
+__all__ = ["Outcome", "PlasmaController"]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    deferred: bool = False  # the sequence answers later with a CommandReply
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ResumeTrack:
+    line: int | None
+    index: int  # the how-many-th P0 of the program
+
+
+class PlasmaController:
+    def __init__(self, sequence: CutSequence | None = None) -> None:
+        self.seq = sequence or CutSequence()
+        self.resume_points: list[ResumeTrack] = []
+        self.current_a: float | None = None
+
+    @property
+    def last_resume_point(self) -> ResumeTrack | None:
+        return self.resume_points[-1] if self.resume_points else None
+
+    def handle(
+        self, command: Command, now: float, xy_mm: tuple[float, float] | None = None
+    ) -> Outcome:
+        seq = self.seq
+        if isinstance(command, TorchStart):
+            seq.start(now, xy_mm)
+            return Outcome(deferred=True)
+        if isinstance(command, TorchStop):
+            seq.stop(now, xy_mm)
+            return Outcome(deferred=True)
+        if isinstance(command, ProbeAndStart):
+            return self._probe_and_start(command, now, xy_mm)
+        if isinstance(command, PlasmaMode):
+            if seq.busy and not command.enabled:
+                raise CommandError(f"T{command.tool} M6", "cannot leave plasma mode during a cut")
+            seq.plasma_mode = command.enabled
+        elif isinstance(command, SetCutParams):
+            seq.set_params(command.params)  # a later G200 overwrites; takes effect next cut
+        elif isinstance(command, LegacyMode):
+            if seq.busy:
+                raise CommandError("G200", "cannot switch to legacy mode during a cut")
+            seq.g200_active = False
+        elif isinstance(command, ThcEnable):
+            seq.set_thc(command.enabled, command.z_feed_mm_min)
+        elif isinstance(command, VoltageAdjust):
+            seq.adjust_voltage(command.delta_v)
+            return Outcome(data={"target_v": seq.thc.target_v, "offset_v": seq.voltage_offset_v})
+        elif isinstance(command, ResumePoint):
+            self.resume_points.append(ResumeTrack(command.line, len(self.resume_points)))
+            return Outcome(data={"resume_line": command.line, "index": len(self.resume_points) - 1})
+        elif isinstance(command, SetCurrent):
+            self.current_a = command.current_a
+            seq._emit(act.SetCurrent(command.current_a))
+        elif isinstance(command, VoltageMode):
+            volts = None if command.auto else command.volts
+            seq.set_params(replace(seq.params, cut_voltage_v=volts))
+        elif isinstance(command, OperatingMode):
+            if seq.busy:
+                raise CommandError("operating_mode", "cannot change the mode during a cut")
+            seq.mode = command.mode
+        elif isinstance(command, VelocityReduction):
+            seq.velocity_percent = command.percent if command.percent > 0 else 100.0
+        elif isinstance(command, CycleStart):
+            if seq.state is not State.S1_WAIT:
+                raise CommandError("cycle_start", f"nothing waits for cycle start ({seq.state})")
+            seq.cycle_start(now)
+            return Outcome(deferred=False)
+        elif isinstance(command, Rearm):
+            if seq.state is not State.FAULTED:
+                raise CommandError("rearm", f"nothing to re-arm ({seq.state})")
+            seq.rearm(now)
+        elif isinstance(command, OhmicTest):
+            if seq.busy:
+                raise CommandError("ohmic_test", "not during a cut")
+            seq.ohmic_test(now)
+        return Outcome()
+
+    def _probe_and_start(
+        self, p6: ProbeAndStart, now: float, xy_mm: tuple[float, float] | None
+    ) -> Outcome:
+        seq = self.seq
+        params = replace(
+            seq.params,
+            touch_feed_mm_min=p6.touch_feed_mm_min,
+            pierce_height_mm=p6.pierce_height_mm,
+            pierce_delay_ms=p6.pierce_delay_s * 1000.0,
+            cut_height_mm=p6.cut_height_mm,
+        )
+        if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
+            seq.set_params(params)
+            return Outcome(data={"mode": p6.mode})
+        seq.set_params(params)
+        seq.config = replace(seq.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
+        # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
+        seq.set_thc(False)
+        seq.start(now, xy_mm)
+        return Outcome(deferred=True)

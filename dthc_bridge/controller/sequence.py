@@ -1,0 +1,715 @@
+"""The plasma cut sequence: one state machine, events and a clock in, actions out.
+
+    IDLE -M3-> TO_PROBE_HEIGHT -> PROBING -> CREEP_UP -> TO_PIERCE -> TORCH_ON -> ARC_WAIT
+      -> PIERCE_DELAY -> [S1: S1_RAISE -> S1_WAIT -(cycle start)-> S1_LOWER -> S1_RELIGHT]
+      -> [PUDDLE_JUMP] -> TO_CUT_HEIGHT -> CUTTING -M5-> PAUSE_AT_END -> TO_SAFE -> IDLE
+
+Every fault while the torch may be lit (arc lost, breakaway, float/ohmic contact after arc
+OK, Z limit, board fault, link down) ends in FAULTED: torch off, the sender told to pause,
+Z to safe height, touch-off required next time. FAULTED leaves only on an explicit re-arm
+(DESIGN.md invariant 3). No I/O here: the driver executes the actions and reports back.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+from typing import Any
+
+from . import actions as act
+from .commands import CutParams, ThcMode
+from .thc import Lock, ThcController
+
+__all__ = ["CutSequence", "SequenceConfig", "State"]
+
+ARC_OK = 1 << 0
+OHMIC = 1 << 1
+FLOAT = 1 << 2
+BREAKAWAY = 1 << 3
+THC_UP = 1 << 4
+THC_DOWN = 1 << 5
+ESTOP = 1 << 6
+
+
+class State(StrEnum):
+    IDLE = "idle"
+    TO_PROBE_HEIGHT = "to_probe_height"
+    PROBING = "probing"
+    CREEP_UP = "creep_up"
+    TO_PIERCE = "to_pierce_height"
+    TORCH_ON = "torch_on"
+    ARC_WAIT = "arc_wait"
+    RETRY_DELAY = "arc_retry_delay"
+    PIERCE_DELAY = "pierce_delay"
+    S1_RAISE = "s1_raise"
+    S1_WAIT = "s1_wait_cycle_start"
+    S1_LOWER = "s1_lower"
+    PUDDLE_JUMP = "puddle_jump"
+    TO_CUT_HEIGHT = "to_cut_height"
+    CUTTING = "cutting"
+    PAUSE_AT_END = "pause_at_end"
+    TO_SAFE = "to_safe_height"
+    FAULTED = "faulted"
+    OHMIC_TEST = "ohmic_test"
+
+
+@dataclass(frozen=True)
+class SequenceConfig:
+    z_min_mm: float = 0.0
+    z_max_mm: float = 100.0
+    top_margin_mm: float = 5.0  # THC and safe height stay this far below the top of travel
+    setup_speed_mm_s: float = 40.0
+    probe_height_mm: float = 25.0  # first probe starts here above Z min (slats + plate)
+    probe_clearance_mm: float = 5.0  # later probes start this far above the last surface
+    creep_speed_mm_s: float = 1.0
+    float_travel_mm: float = 1.5
+    ohmic_offset_mm: float = 0.0
+    ohmic_retries: int = 1  # then fall back to the float switch
+    arc_ok_timeout_s: float = 3.0
+    arc_start_attempts: int = 3
+    arc_retry_delay_s: float = 1.0
+    input_debounce_s: float = 0.005
+    arc_lost_delay_s: float = 0.02
+    thc_delay_s: float = 1.0  # from arc OK: the start transient settles within it
+    safe_height_mm: float = 20.0  # above the surface
+    pause_at_end_s: float = 0.0
+    puddle_height_percent: float = 100.0  # of pierce height; 100 = no puddle jump
+    puddle_delay_s: float = 0.0
+    ihs_skip_distance_mm: float = 0.0  # 0: always touch off
+    ihs_skip_type: int = 0  # 0: from the end of the last cut (THC on), 1: from its start
+    auto_voltage_window_s: float = 0.03
+    at_speed_settle_s: float = 0.15
+    dry_run: bool = False
+    # Mode 0 (arc OK from voltage): window and agreement, plasma-facts.md
+    arc_ok_low_v: float = 60.0
+    arc_ok_high_v: float = 250.0
+    arc_ok_agree_v: float = 10.0
+    thc_updown_speed_mm_s: float = 5.0  # mode 2: constant Z speed while up/down is asserted
+
+
+@dataclass
+class _Cut:
+    zero_mm: float  # surface, in carriage Z
+    probed: bool
+    start_xy: tuple[float, float] | None
+    attempts: int = 0
+    arc_ok_since: float | None = None
+    arc_lost_since: float | None = None
+    cutting_since: float | None = None
+    at_speed_since: float | None = None
+    thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
+    auto_v: deque[float] = field(default_factory=lambda: deque(maxlen=50))
+    auto_v_since: float | None = None
+    relit: bool = False
+    ohmic_failed: int = 0
+
+
+class CutSequence:
+    def __init__(
+        self, config: SequenceConfig | None = None, thc: ThcController | None = None
+    ) -> None:
+        self.config = config or SequenceConfig()
+        self.thc = thc or ThcController()
+        self.params = CutParams()
+        self.g200_active = True  # MASSO power-on default
+        self.plasma_mode = False
+        self.mode = ThcMode.ARC_OK_AND_VOLTAGE
+        self.thc_enabled = False  # M667 turns it on
+        self.thc_z_feed_mm_min: float | None = None
+        self.velocity_percent = 100.0
+        self.voltage_offset_v = 0.0  # torch up / torch down
+        self.state = State.IDLE
+        self.cut: _Cut | None = None
+        self.last_zero_mm: float | None = None
+        self.last_cut_end_xy: tuple[float, float] | None = None
+        self.last_cut_start_xy: tuple[float, float] | None = None
+        self.last_thc_active = False
+        self.probe_required = True
+        self.error = ""
+        self.now = 0.0
+        self._timer: float | None = None
+        self._inputs = 0
+        self._debounced = 0
+        self._pending_bits: dict[int, float] = {}
+        self._z_mm = math.nan
+        self._xy_speed: float | None = None
+        self._requested_mm_s: float | None = None
+        self._last_thc_t: float | None = None
+        self._voltages: deque[float] = deque(maxlen=10)
+        self._actions: list[act.Action] = []
+        self._move_token = 0
+        self._creep_sensor_ohmic = False
+        self._pending_reply: str | None = None
+        self.safe_z_mm = self.config.z_max_mm - self.config.top_margin_mm
+        self.warnings: list[str] = []
+        self.pierce_count = 0
+
+    # --- plumbing --------------------------------------------------------------------------
+
+    def drain(self) -> list[act.Action]:
+        out, self._actions = self._actions, []
+        return out
+
+    def _emit(self, *actions: act.Action) -> None:
+        self._actions.extend(actions)
+
+    def _move(self, target_mm: float, feed_mm_s: float) -> None:
+        self._move_token += 1
+        self._emit(act.MoveZ(target_mm, feed_mm_s, self._move_token))
+
+    def _reply(self, ok: bool, error: str = "") -> None:
+        if self._pending_reply is not None:
+            self._emit(act.CommandReply(self._pending_reply, ok, error))
+            self._pending_reply = None
+
+    def _enter(self, state: State, timer_s: float | None = None) -> None:
+        self.state = state
+        self._timer = None if timer_s is None else self.now + timer_s
+
+    @property
+    def busy(self) -> bool:
+        return self.state not in (State.IDLE, State.FAULTED)
+
+    def snapshot(self) -> dict[str, Any]:
+        p = self.params
+        cut = self.cut
+        return {
+            "state": str(self.state),
+            "mode": int(self.mode),
+            "plasma_mode": self.plasma_mode,
+            "g200_active": self.g200_active,
+            "thc_enabled": self.thc_enabled,
+            "target_v": self.thc.target_v,
+            "voltage_v": self.thc.filtered_v,
+            "z_mm": None if math.isnan(self._z_mm) else round(self._z_mm, 3),
+            "height_mm": (
+                None if cut is None or math.isnan(self._z_mm - cut.zero_mm)
+                else round(self._z_mm - cut.zero_mm, 3)
+            ),
+            "locks": sorted(str(lock) for lock in self.thc.locks(self.now)),
+            "probe_required": self.probe_required,
+            "error": self.error,
+            "params": {
+                "touch_feed_mm_min": p.touch_feed_mm_min, "pierce_height_mm": p.pierce_height_mm,
+                "pierce_delay_ms": p.pierce_delay_ms, "cut_height_mm": p.cut_height_mm,
+                "cut_voltage_v": p.cut_voltage_v, "anti_dive_percent": p.anti_dive_percent,
+                "ohmic": p.ohmic, "stop_after_pierce": p.stop_after_pierce,
+            },
+        }  # fmt: skip
+
+    # --- commands from the sender ----------------------------------------------------------
+
+    def set_params(self, params: CutParams) -> None:
+        self.params = params
+        self.g200_active = True
+        self.thc.anti_dive_percent = params.anti_dive_percent
+
+    def set_thc(self, enabled: bool, z_feed_mm_min: float | None = None) -> None:
+        self.thc_enabled = enabled
+        if z_feed_mm_min is not None:
+            self.thc_z_feed_mm_min = z_feed_mm_min  # remembered until overwritten
+        self.thc.set_speed_limit(self.thc_z_feed_mm_min)
+        self.thc.enabled = enabled
+
+    def adjust_voltage(self, delta_v: float) -> None:
+        self.voltage_offset_v += delta_v
+        if self.thc.target_v is not None:
+            self.thc.target_v += delta_v
+
+    def start(self, now: float, xy_mm: tuple[float, float] | None = None) -> None:
+        """M3. Answered (CommandReply) when XY motion may start, or with the error."""
+        self.now = now
+        self._pending_reply = "M3"
+        if self.state is State.FAULTED:
+            self._reply(False, f"re-arm required after: {self.error}")
+            return
+        if self.busy:
+            self._reply(False, f"a cut is already running ({self.state})")
+            return
+        if not self.plasma_mode:
+            self._reply(False, "not in plasma mode: send T112 M6 first")
+            return
+        if not self.g200_active:
+            self._reply(False, "legacy mode (bare G200): no automatic start sequence")
+            return
+        if self._debounced & (OHMIC | FLOAT | BREAKAWAY):
+            self._fault("float, ohmic or breakaway active before probing")
+            return
+        self.error = ""
+        self.thc.reset()
+        self.voltage_offset_v = 0.0
+        if self._may_skip_probe(xy_mm):
+            assert self.last_zero_mm is not None
+            self.cut = _Cut(self.last_zero_mm, probed=False, start_xy=xy_mm)
+            self._to_pierce()
+            return
+        cfg = self.config
+        start_z = (
+            self.last_zero_mm + cfg.probe_clearance_mm
+            if self.last_zero_mm is not None
+            else cfg.z_min_mm + cfg.probe_height_mm
+        )
+        start_z = min(start_z, self.safe_z_mm)
+        self.cut = _Cut(math.nan, probed=True, start_xy=xy_mm)
+        self._enter(State.TO_PROBE_HEIGHT)
+        self._move(start_z, cfg.setup_speed_mm_s)
+
+    def _may_skip_probe(self, xy_mm: tuple[float, float] | None) -> bool:
+        cfg = self.config
+        if cfg.ihs_skip_distance_mm <= 0 or self.probe_required or self.last_zero_mm is None:
+            return False
+        ref = self.last_cut_start_xy if cfg.ihs_skip_type == 1 else self.last_cut_end_xy
+        if ref is None or xy_mm is None:
+            return False
+        if cfg.ihs_skip_type == 0 and not self.last_thc_active:
+            ref = self.last_cut_start_xy  # PlasmaC: from the probe point when THC was off
+            if ref is None:
+                return False
+        return math.dist(ref, xy_mm) < cfg.ihs_skip_distance_mm
+
+    def stop(self, now: float, xy_mm: tuple[float, float] | None = None) -> None:
+        """M5: torch off (after the optional pause at end), then safe height; then answered."""
+        self.now = now
+        self._pending_reply = "M5"
+        if self.state is State.FAULTED or not self.busy:
+            self._emit(act.Torch(False))
+            self._reply(True)
+            return
+        self.last_cut_end_xy = xy_mm
+        if self.state is State.CUTTING and self.config.pause_at_end_s > 0:
+            self._enter(State.PAUSE_AT_END, self.config.pause_at_end_s)
+            return
+        self._end_cut()
+
+    def cycle_start(self, now: float) -> None:
+        self.now = now
+        if self.state is State.S1_WAIT:
+            assert self.cut is not None
+            self._enter(State.S1_LOWER)
+            self._move(self._cut_z(), self.config.setup_speed_mm_s)
+
+    def rearm(self, now: float) -> None:
+        """Leave FAULTED explicitly (the operator has seen the error); touch-off will follow."""
+        self.now = now
+        if self.state is State.FAULTED:
+            self._emit(act.ResetFaults())
+            self._enter(State.IDLE)
+            self.probe_required = True
+
+    def ohmic_test(self, now: float) -> None:
+        """Ohmic sense on with the torch in the air: contact means a shorted torch."""
+        self.now = now
+        if self.busy:
+            return
+        self._emit(act.OhmicSense(True))
+        self._enter(State.OHMIC_TEST, 0.1)
+
+    # --- events from the board -------------------------------------------------------------
+
+    def on_inputs(self, bits: int, z_mm: float, now: float) -> None:
+        """Raw input snapshot (from SAMPLES and EVENTs); debounced here."""
+        self.now = now
+        self._z_mm = z_mm
+        changed = bits ^ self._inputs
+        self._inputs = bits
+        while changed:
+            bit = changed & -changed
+            changed &= changed - 1
+            self._pending_bits[bit] = now
+        self._debounce(now)
+
+    def _debounce(self, now: float) -> None:
+        for bit, since in list(self._pending_bits.items()):
+            if now - since >= self.config.input_debounce_s:
+                del self._pending_bits[bit]
+                before = self._debounced
+                self._debounced = (self._debounced & ~bit) | (self._inputs & bit)
+                if before != self._debounced:
+                    self._on_edge(bit, bool(self._debounced & bit))
+
+    def _on_edge(self, bit: int, active: bool) -> None:
+        cutting = self.state in (
+            State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
+            State.CUTTING, State.PAUSE_AT_END,
+        )  # fmt: skip
+        if bit == BREAKAWAY and active and self.busy:
+            self._fault("breakaway switch tripped")
+        elif bit == ESTOP and active:
+            self._fault("E-stop")
+        elif bit in (FLOAT, OHMIC) and active and cutting and self._arc_ok_seen():
+            self._fault(f"{'float switch' if bit == FLOAT else 'ohmic contact'} during the cut")
+        elif bit == OHMIC and active and self.state is State.OHMIC_TEST:
+            self._emit(act.OhmicSense(False))
+            self._fault("ohmic test: contact with the torch in the air (shorted torch?)")
+        elif bit in (FLOAT, OHMIC) and not active and self.state is State.CREEP_UP:
+            self._released()
+
+    def _arc_ok_seen(self) -> bool:
+        return self.cut is not None and self.cut.arc_ok_since is not None
+
+    def _arc_ok(self) -> bool:
+        if self.config.dry_run:
+            return True
+        if self.mode is ThcMode.VOLTAGE_ONLY:
+            return self._voltage_arc_ok()
+        return bool(self._debounced & ARC_OK)
+
+    def _voltage_arc_ok(self) -> bool:
+        cfg = self.config
+        if len(self._voltages) < self._voltages.maxlen:  # type: ignore[operator]
+            return False
+        v = self._voltages[-1]
+        if not cfg.arc_ok_low_v <= v <= cfg.arc_ok_high_v:
+            return False
+        return all(abs(x - v) <= cfg.arc_ok_agree_v for x in self._voltages)
+
+    def on_probe_done(
+        self, contact: bool, ohmic: bool, contact_z_mm: float, stop_z_mm: float
+    ) -> None:
+        if self.state is not State.PROBING or self.cut is None:
+            return
+        cfg = self.config
+        self._z_mm = stop_z_mm
+        if not contact:
+            self._fault("no contact while probing down (plate missing or Z min reached)")
+            return
+        if self.params.ohmic and not ohmic and self.cut.ohmic_failed < cfg.ohmic_retries:
+            # Float fired before ohmic: retry ohmic from the start height, then accept float.
+            self.cut.ohmic_failed += 1
+            self._enter(State.TO_PROBE_HEIGHT)
+            self._move(stop_z_mm + cfg.probe_clearance_mm, cfg.setup_speed_mm_s)
+            return
+        self.cut.zero_mm = math.nan
+        self._creep_sensor_ohmic = ohmic
+        self._enter(State.CREEP_UP)
+        self._emit(act.OhmicSense(ohmic))
+        self._move(stop_z_mm + cfg.float_travel_mm + 2.0, cfg.creep_speed_mm_s)
+
+    def _released(self) -> None:
+        assert self.cut is not None
+        cfg = self.config
+        offset = cfg.ohmic_offset_mm if self._creep_sensor_ohmic else cfg.float_travel_mm
+        self.cut.zero_mm = self._z_mm + offset
+        self.last_zero_mm = self.cut.zero_mm
+        self.probe_required = False
+        self._emit(act.OhmicSense(False))
+        self._to_pierce()  # the pierce move supersedes the creep
+
+    def on_motion_done(self, token: int, reached: bool, z_mm: float) -> None:
+        self._z_mm = z_mm
+        if token != self._move_token:
+            return  # a move that a later one superseded
+        cfg = self.config
+        state = self.state
+        if not reached and state in (
+            State.TO_PROBE_HEIGHT,
+            State.TO_PIERCE,
+            State.TO_CUT_HEIGHT,
+            State.S1_LOWER,
+        ):
+            self._fault(f"Z move did not complete ({state})")
+            return
+        if state is State.TO_PROBE_HEIGHT:
+            assert self.cut is not None
+            use_ohmic = self.params.ohmic
+            self._enter(State.PROBING)
+            if use_ohmic:
+                self._emit(act.OhmicSense(True))
+            self._emit(
+                act.ProbeZ(
+                    self.params.touch_feed_mm_min / 60.0,
+                    max(0.5, z_mm - cfg.z_min_mm),
+                    use_ohmic,
+                    True,
+                )
+            )
+        elif state is State.CREEP_UP:
+            self._fault("touch-off sensor did not release while creeping up")
+        elif state is State.TO_PIERCE:
+            self._torch_on()
+        elif state is State.S1_RAISE:
+            self._enter(State.S1_WAIT)
+            self._emit(act.PauseProgram("stop after pierce: clean the surface, then cycle start"))
+        elif state is State.S1_LOWER:
+            assert self.cut is not None
+            self.cut.relit = True
+            self.cut.arc_ok_since = None
+            self._torch_on()
+        elif state is State.TO_CUT_HEIGHT:
+            self._start_cutting()
+        elif state is State.TO_SAFE:
+            self._enter(State.IDLE)
+            self._reply(True)
+        elif state is State.FAULTED:
+            pass
+
+    def on_board_fault(self, reason: str) -> None:
+        if self.state is not State.FAULTED:
+            self._fault(f"board fault: {reason}")
+
+    def on_link_down(self, reason: str) -> None:
+        if self.busy:
+            self._fault(f"board link down: {reason}")
+
+    def on_action_failed(self, action: act.Action, error: str) -> None:
+        if isinstance(action, act.Torch) and not action.on:
+            return  # the board turns the torch off on any fault by itself
+        if self.busy:
+            self._fault(f"{type(action).__name__} failed: {error}")
+
+    # --- samples and time ------------------------------------------------------------------
+
+    def on_samples(  # noqa: PLR0917 - one batch's fields, in wire order
+        self,
+        volts: Sequence[float],
+        period_s: float,
+        z_mm: float,
+        xy_speed_mm_s: float | None,
+        requested_feed_mm_s: float | None,
+        now: float,
+    ) -> None:
+        self.now = now
+        self._z_mm = z_mm
+        self._voltages.extend(volts)
+        self._xy_speed = xy_speed_mm_s
+        if requested_feed_mm_s is not None:
+            # The programmed feed, not the reduced one: an M67 E3 reduction locks THC (PlasmaC).
+            self._requested_mm_s = requested_feed_mm_s
+        self.thc.observe_speed(xy_speed_mm_s, self._requested_mm_s, now)
+        dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
+        self._last_thc_t = now
+        if self.state is State.CUTTING:
+            self._cutting_step(volts, period_s, dt)
+        else:
+            self.thc.filter(volts, period_s, now)
+        self.tick(now)
+
+    def _cutting_step(self, volts: Sequence[float], period_s: float, dt: float) -> None:
+        cut = self.cut
+        assert cut is not None
+        cfg = self.config
+        now = self.now
+        locks = self.thc.locks(now)
+        at_speed = Lock.VELOCITY not in locks and Lock.NO_SPEED not in locks
+        if self.params.anti_dive_percent == 0:
+            at_speed = True
+        if not at_speed:
+            cut.at_speed_since = None
+        elif cut.at_speed_since is None:
+            cut.at_speed_since = now
+        # The voltage rise of a slow torch decays only some tens of ms after the machine is
+        # back at speed: take the target once it has been at speed a little while.
+        settled = (
+            cut.at_speed_since is not None and now - cut.at_speed_since >= cfg.at_speed_settle_s
+        )
+        # The THC delay guards the start transient, so it counts from arc OK; the target is
+        # taken at the first moment after it with the machine at speed, before the plate
+        # has had time to drift away from the height that was just probed.
+        arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
+        delay_done = now - arc_ok_since >= cfg.thc_delay_s and now - (cut.cutting_since or now) >= 0
+        arc_lost_running = cut.arc_lost_since is not None
+        self.thc.frozen = self.thc.target_v is None or arc_lost_running
+        if delay_done and settled and self.thc.target_v is None:
+            self.thc.filter(volts, period_s, now)
+            self._acquire_target(now)
+            if self.thc.target_v is not None:
+                self.thc.frozen = arc_lost_running
+            velocity = 0.0
+        elif self.mode is ThcMode.ARC_OK_AND_UPDOWN:
+            self.thc.filter(volts, period_s, now)
+            velocity = self._updown_velocity()
+        else:
+            velocity = self.thc.update(volts, period_s, now, dt).velocity_mm_s
+        z_next = self._z_mm + velocity * dt
+        if velocity < 0 and z_next <= cfg.z_min_mm:
+            self._fault("Z min limit reached during THC")
+            return
+        if velocity > 0 and z_next >= cfg.z_max_mm - cfg.top_margin_mm:
+            self._fault("Z max limit reached during THC")
+            return
+        cut.thc_lift_mm = max(cut.thc_lift_mm, self._z_mm - self._cut_z())
+        self._emit(act.ZVelocity(velocity))
+
+    def _updown_velocity(self) -> float:
+        if not self.thc_enabled or self.thc.frozen:
+            return 0.0
+        locks = self.thc.locks(self.now) - {Lock.FROZEN}
+        if Lock.VELOCITY in locks or Lock.NO_SPEED in locks:
+            return 0.0
+        speed = self.config.thc_updown_speed_mm_s
+        if self._debounced & THC_UP:
+            return speed
+        if self._debounced & THC_DOWN:
+            return -speed
+        return 0.0
+
+    def _acquire_target(self, now: float) -> None:
+        cut = self.cut
+        assert cut is not None
+        fixed = self.params.cut_voltage_v
+        if fixed is not None:
+            self.thc.target_v = fixed + self.voltage_offset_v
+            return
+        # Auto voltage (G200 V0, G100 P5 A1): the mean of the filtered voltage over a short
+        # window at speed; short, because the plate drifts under a torch that holds still.
+        cfg = self.config
+        if cut.auto_v_since is None:
+            cut.auto_v_since = now
+        filtered = self.thc.filtered_v
+        if filtered is not None:
+            cut.auto_v.append(filtered)
+        if now - cut.auto_v_since >= cfg.auto_voltage_window_s and cut.auto_v:
+            self.thc.target_v = sum(cut.auto_v) / len(cut.auto_v) + self.voltage_offset_v
+
+    def tick(self, now: float) -> None:
+        self.now = now
+        self._debounce(now)
+        cut = self.cut
+        state = self.state
+        if state in (State.ARC_WAIT,) and cut is not None:
+            if self._arc_ok():
+                cut.arc_ok_since = now
+                self.pierce_count += 1
+                if cut.relit:
+                    self._enter(State.TO_CUT_HEIGHT)
+                    self._start_cutting()
+                else:
+                    self._enter(State.PIERCE_DELAY, self.params.pierce_delay_ms / 1000.0)
+                return
+        elif (
+            state in (State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT, State.CUTTING)
+            and cut
+        ):
+            if not self._arc_ok():
+                if cut.arc_lost_since is None:
+                    cut.arc_lost_since = now
+                elif now - cut.arc_lost_since >= self.config.arc_lost_delay_s:
+                    self._fault("arc lost")
+                    return
+            else:
+                cut.arc_lost_since = None
+        if self._timer is None or now < self._timer:
+            return
+        self._timer = None
+        if state is State.ARC_WAIT:
+            assert cut is not None
+            self._emit(act.Torch(False))
+            if cut.attempts >= self.config.arc_start_attempts:
+                self._fault(f"no arc OK after {cut.attempts} start attempts")
+            else:
+                self._enter(State.RETRY_DELAY, self.config.arc_retry_delay_s)
+        elif state is State.RETRY_DELAY:
+            self._torch_on()
+        elif state is State.PIERCE_DELAY:
+            self._after_pierce()
+        elif state is State.PUDDLE_JUMP:
+            self._enter(State.TO_CUT_HEIGHT)
+            self._move(self._cut_z(), self.config.setup_speed_mm_s)
+        elif state is State.PAUSE_AT_END:
+            self._end_cut()
+        elif state is State.OHMIC_TEST:
+            self._emit(act.OhmicSense(False))
+            self._enter(State.IDLE)
+
+    # --- steps -----------------------------------------------------------------------------
+
+    def _cut_z(self) -> float:
+        assert self.cut is not None
+        return self.cut.zero_mm + self.params.cut_height_mm
+
+    def _to_pierce(self) -> None:
+        assert self.cut is not None
+        cfg = self.config
+        pierce_z = self.cut.zero_mm + self.params.pierce_height_mm
+        if pierce_z + 1.0 > cfg.z_max_mm - cfg.top_margin_mm:
+            self._fault("pierce height is above the top of Z travel (material too high)")
+            return
+        self._update_safe_z()
+        self._enter(State.TO_PIERCE)
+        self._move(pierce_z, cfg.setup_speed_mm_s)
+
+    def _update_safe_z(self) -> None:
+        cut = self.cut
+        assert cut is not None
+        cfg = self.config
+        top = cfg.z_max_mm - cfg.top_margin_mm
+        low = cut.zero_mm + self.params.pierce_height_mm + 1.0
+        wanted = max(cut.zero_mm + cfg.safe_height_mm + cut.thc_lift_mm, low)
+        if wanted > top:
+            self.warnings.append(f"safe height reduced to {top:.1f} mm (top of Z travel)")
+            wanted = top
+        self.safe_z_mm = wanted
+
+    def _torch_on(self) -> None:
+        cut = self.cut
+        assert cut is not None
+        cut.attempts += 1
+        self._voltages.clear()
+        if not self.config.dry_run:
+            self._emit(act.Torch(True))
+        self._enter(State.ARC_WAIT, self.config.arc_ok_timeout_s)
+
+    def _after_pierce(self) -> None:
+        assert self.cut is not None
+        cfg = self.config
+        if self.params.stop_after_pierce and not self.cut.relit:
+            self._emit(act.Torch(False))
+            self._enter(State.S1_RAISE)
+            self._move(self.safe_z_mm, cfg.setup_speed_mm_s)
+            return
+        if cfg.puddle_height_percent != 100.0 or cfg.puddle_delay_s > 0:
+            self._reply(True)  # XY may start during the puddle jump
+            puddle_z = (
+                self.cut.zero_mm + self.params.pierce_height_mm * cfg.puddle_height_percent / 100
+            )
+            self._move(puddle_z, cfg.setup_speed_mm_s)
+            self._enter(State.PUDDLE_JUMP, cfg.puddle_delay_s)
+            return
+        self._enter(State.TO_CUT_HEIGHT)
+        self._move(self._cut_z(), cfg.setup_speed_mm_s)
+
+    def _start_cutting(self) -> None:
+        cut = self.cut
+        assert cut is not None
+        self._enter(State.CUTTING)
+        cut.cutting_since = self.now
+        self.last_cut_start_xy = cut.start_xy
+        self.thc.reset()
+        self.thc.set_speed_limit(self.thc_z_feed_mm_min)
+        self.thc.enabled = self.thc_enabled
+        self.thc.anti_dive_percent = self.params.anti_dive_percent
+        self._last_thc_t = None
+        self._reply(True)  # M3 answered: XY motion may start
+
+    def _end_cut(self) -> None:
+        self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
+        self._emit(act.ZVelocity(0.0), act.Torch(False))
+        if self.cut is not None and not math.isnan(self.cut.zero_mm):
+            self._update_safe_z()
+        self._enter(State.TO_SAFE)
+        self._move(self.safe_z_mm, self.config.setup_speed_mm_s)
+
+    def _fault(self, reason: str) -> None:
+        """Invariant 3: torch off, sender paused, Z to safe height, touch-off required."""
+        self.error = reason
+        self.probe_required = True
+        was = self.state
+        self._enter(State.FAULTED)
+        self._emit(act.Torch(False), act.ZVelocity(0.0), act.OhmicSense(False))
+        if self.cut is not None and not math.isnan(self.cut.zero_mm):
+            self._update_safe_z()
+        target = max(self.safe_z_mm, self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm)
+        self._move(
+            min(target, self.config.z_max_mm - self.config.top_margin_mm),
+            self.config.setup_speed_mm_s,
+        )
+        self._emit(act.PauseProgram(reason))
+        self._reply(False, reason)
+        del was
+
+
+def with_board_limits(config: SequenceConfig, z_min_mm: float, z_max_mm: float) -> SequenceConfig:
+    return replace(config, z_min_mm=z_min_mm, z_max_mm=z_max_mm)

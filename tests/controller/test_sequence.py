@@ -1,0 +1,257 @@
+"""The cut sequence closing the loop over the simulated board, in simulated time."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from dthc_bridge.controller import actions as act
+from dthc_bridge.controller.commands import CutParams
+from dthc_bridge.controller.sequence import SequenceConfig, State
+from mock_device.plant import load_scenario
+
+from .closed_loop import ClosedLoop
+
+SQUARE = ("G1 X250 Y50 F5500", "G1 X250 Y150", "G1 X50 Y150", "G1 X50 Y50")
+
+
+def ready(
+    scenario: str = "flat_clean",
+    *,
+    seed: int = 1,
+    config: SequenceConfig | None = None,
+    **params: object,
+) -> ClosedLoop:
+    """Plasma mode, G200 from the scenario's material, THC on, torch over the plate."""
+    loop = ClosedLoop(scenario, seed=seed, config=config)
+    material = load_scenario(scenario).material
+    base: dict[str, object] = {
+        "touch_feed_mm_min": 300.0,
+        "pierce_height_mm": material.pierce_height_mm,
+        "pierce_delay_ms": 300.0,
+        "cut_height_mm": material.cut_height_mm,
+        "cut_voltage_v": material.cut_voltage_v,
+        "ohmic": True,
+    }
+    base.update(params)
+    loop.seq.plasma_mode = True
+    loop.seq.set_params(CutParams(**base))  # type: ignore[arg-type]  # keyword test data
+    loop.seq.set_thc(True, 3000)
+    loop.plant.gantry.feed_line("G0 X50 Y50")
+    assert loop.run_until(lambda: loop.plant.gantry.idle, 10)
+    return loop
+
+
+def test_a_full_cut_probes_pierces_cuts_and_returns_to_safe_height() -> None:
+    """M3 is answered once at cut height; the cut holds height; M5 ends at safe height."""
+    loop = ready()
+    started, ok, ended = loop.cut(*SQUARE)
+    assert started.ok
+    assert ok
+    assert ended.ok
+    assert loop.seq.state is State.IDLE
+    assert not loop.plant.torch_on
+    assert loop.seq.cut is not None
+    assert loop.seq.cut.zero_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.05)
+    assert loop.plant.zaxis.position_mm == pytest.approx(loop.seq.safe_z_mm, abs=0.01)
+    cut = loop.plant.truth.summary().cuts[0]
+    assert cut.height_rms_error_mm < 0.1
+    assert cut.dives == 0
+    assert loop.plant.truth.violations == {}
+
+
+def test_m3_is_answered_only_when_the_torch_is_at_cut_height() -> None:
+    """At the moment M3 is answered the arc is on and the torch within 0.1 mm of cut height."""
+    loop = ready()
+    reply = loop.m3()
+    assert reply.ok
+    assert loop.plant.arc_ok
+    assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.1)
+
+
+def test_painted_plate_retries_ohmic_then_falls_back_to_the_float_switch() -> None:
+    """Ohmic never contacts on paint: one retry, then the float switch's travel-corrected zero."""
+    loop = ready("painted_plate")
+    assert loop.m3().ok
+    cut = loop.seq.cut
+    assert cut is not None
+    assert cut.ohmic_failed == 1
+    assert cut.zero_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.15)
+
+
+def test_no_arc_after_three_attempts_faults_and_pauses_the_sender() -> None:
+    """A pilot that never transfers (pierce too high): 3 attempts, then the fault path."""
+    loop = ready(pierce_height_mm=9.5, cut_height_mm=1.5)
+    loop.seq.config = replace(loop.seq.config, arc_ok_timeout_s=0.5, arc_retry_delay_s=0.2)
+    reply = loop.m3(max_s=30)
+    assert not reply.ok
+    assert "no arc OK after 3" in reply.error
+    assert loop.seq.state is State.FAULTED
+    assert loop.pauses
+    assert not loop.plant.torch_on
+    assert loop.seq.probe_required
+
+
+def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
+    """The arc goes out mid-cut: torch off, pause requested, Z up, re-arm required."""
+    loop = ready("arc_lost_midcut")
+    assert loop.m3().ok
+    assert not loop.move("G1 X1000 Y50 F4000", max_s=30)
+    assert loop.seq.error == "arc lost"
+    assert loop.pauses == ["arc lost"]
+    loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
+    assert not loop.plant.torch_on
+    assert loop.plant.zaxis.position_mm >= loop.seq.safe_z_mm - 0.01
+    refused = loop.m3()
+    assert not refused.ok
+    assert "re-arm" in refused.error
+    loop.seq.rearm(loop.now)
+    loop.execute(loop.seq.drain())
+    assert loop.seq.state is State.IDLE
+
+
+def test_breakaway_mid_cut_faults() -> None:
+    """A tripped breakaway during the cut ends it safely."""
+    loop = ready()
+    assert loop.m3().ok
+    loop.plant.gantry.feed_line("G1 X400 Y50 F5500")
+    loop.run_until(lambda: False, 0.3)
+    loop.plant.head.trip_breakaway()
+    loop.run_until(lambda: loop.seq.state is State.FAULTED, 1.0)
+    assert "breakaway" in loop.seq.error.lower()
+    assert not loop.plant.torch_on
+
+
+def test_float_contact_mid_cut_faults_before_a_crash() -> None:
+    """A target voltage far too low drives the torch down: the float switch ends the cut."""
+    loop = ready(cut_voltage_v=95.0)
+    assert loop.m3().ok
+    assert not loop.move("G1 X400 Y50 F5500", max_s=10)
+    assert "float switch during the cut" in loop.seq.error
+    assert not loop.plant.torch_on
+    assert loop.plant.truth.violations.get("torch_touching_plate_while_cutting", 0) <= 1
+
+
+def test_z_min_limit_during_thc_faults_before_the_plate() -> None:
+    """With a Z min just under the surface, THC driving down stops at the limit with a fault."""
+    loop = ready(cut_voltage_v=100.0)
+    surface = loop.plant.surface_z_mm
+    assert loop.m3().ok
+    loop.seq.config = replace(loop.seq.config, z_min_mm=surface + 0.8)
+    assert not loop.move("G1 X400 Y50 F5500", max_s=10)
+    assert "Z min limit" in loop.seq.error
+    assert loop.plant.true_height_mm > 0.5
+
+
+def test_stop_after_pierce_waits_for_cycle_start_then_relights() -> None:
+    """S1: pierce, torch off, Z up, pause; cycle start lowers, relights and answers M3."""
+    loop = ready(stop_after_pierce=True)
+    loop.seq.start(loop.now, (50.0, 50.0))
+    loop.execute(loop.seq.drain())
+    assert loop.run_until(lambda: loop.seq.state is State.S1_WAIT, 20)
+    assert not loop.plant.torch_on
+    assert loop.pauses
+    assert not loop.replies  # M3 still pending
+    loop.run_until(lambda: False, 0.5)
+    assert loop.seq.state is State.S1_WAIT
+    loop.seq.cycle_start(loop.now)
+    loop.execute(loop.seq.drain())
+    assert loop.run_until(lambda: bool(loop.replies), 10)
+    assert loop.replies[0].ok
+    assert loop.plant.arc_ok
+    assert loop.seq.pierce_count == 2
+
+
+def test_link_down_mid_cut_faults() -> None:
+    """A board link loss during the cut takes the fault path (the board drops the torch)."""
+    loop = ready()
+    assert loop.m3().ok
+    loop.seq.on_link_down("usb unplugged")
+    actions = loop.seq.drain()
+    assert act.Torch(False) in actions
+    assert any(isinstance(a, act.PauseProgram) for a in actions)
+    assert loop.seq.state is State.FAULTED
+
+
+def test_ihs_skip_when_the_next_cut_starts_close_by() -> None:
+    """With skip distance 50 mm and no error, a cut starting 10 mm away does not probe."""
+    loop = ready(config=SequenceConfig(ihs_skip_distance_mm=50.0, ihs_skip_type=1))
+    assert loop.cut("G1 X60 Y50 F5500")[1]
+    probes_before = sum(1 for s in loop.trace.state if s == "probing")
+    loop.plant.gantry.feed_line("G0 X55 Y52")
+    loop.run_until(lambda: loop.plant.gantry.idle, 5)
+    started, ok, _ = loop.cut("G1 X90 Y52 F5500")
+    assert started.ok
+    assert ok
+    assert sum(1 for s in loop.trace.state if s == "probing") == probes_before
+
+
+def test_an_error_forces_touch_off_even_when_skip_would_apply() -> None:
+    """After a fault and re-arm, the next cut probes again although it is close by."""
+    loop = ready(config=SequenceConfig(ihs_skip_distance_mm=50.0, ihs_skip_type=1))
+    assert loop.m3().ok
+    loop.move("G1 X60 Y50 F5500")
+    loop.seq.on_link_down("blip")
+    loop.execute(loop.seq.drain())
+    assert loop.seq.state is State.FAULTED
+    loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
+    loop.seq.rearm(loop.now)
+    loop.execute(loop.seq.drain())
+    before = sum(1 for s in loop.trace.state if s == "probing")
+    assert loop.m3().ok
+    assert sum(1 for s in loop.trace.state if s == "probing") > before
+
+
+def test_dry_run_runs_everything_but_the_arc() -> None:
+    """Dry run: probe, heights and M3 answer without the torch ever firing."""
+    loop = ready(config=SequenceConfig(dry_run=True))
+    reply = loop.m3()
+    assert reply.ok
+    assert not loop.plant.torch_on
+    assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.1)
+
+
+def test_ohmic_test_detects_a_shorted_torch() -> None:
+    """Ohmic sense on with the shield touching the plate is reported as a short."""
+    loop = ready()
+    loop.execute([act.MoveZ(loop.plant.surface_z_mm - 0.2, 10.0, 0)])
+    loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
+    loop.seq.ohmic_test(loop.now)
+    loop.execute(loop.seq.drain())
+    loop.run_until(lambda: loop.seq.state is not State.OHMIC_TEST, 1)
+    assert "shorted torch" in loop.seq.error
+
+
+def test_ohmic_test_in_the_air_passes() -> None:
+    """With the torch clear of the plate the ohmic test ends quietly."""
+    loop = ready()
+    loop.seq.ohmic_test(loop.now)
+    loop.execute(loop.seq.drain())
+    loop.run_until(lambda: loop.seq.state is not State.OHMIC_TEST, 1)
+    assert loop.seq.state is State.IDLE
+    assert loop.seq.error == ""
+
+
+def test_m3_outside_plasma_mode_or_in_legacy_mode_is_refused() -> None:
+    """M3 without T112 M6, or after a bare G200, gets a clear error and changes nothing."""
+    loop = ready()
+    loop.seq.plasma_mode = False
+    assert "T112 M6" in loop.m3().error
+    loop.seq.plasma_mode = True
+    loop.seq.g200_active = False
+    assert "legacy" in loop.m3().error
+    assert loop.seq.state is State.IDLE
+
+
+def test_safe_height_is_raised_by_what_thc_lifted() -> None:
+    """On a plate that rises under the cut, the safe height grows with the THC lift."""
+    loop = ready("warped_sheet", cut_voltage_v=122.0)
+    assert loop.m3().ok
+    before = loop.seq.safe_z_mm
+    assert loop.move("G1 X600 Y100 F6000", max_s=30)
+    loop.m5()
+    cut = loop.seq.cut
+    assert cut is not None
+    assert cut.thc_lift_mm > 0.3
+    assert loop.seq.safe_z_mm == pytest.approx(before + cut.thc_lift_mm, abs=0.05)
