@@ -255,3 +255,56 @@ def test_safe_height_is_raised_by_what_thc_lifted() -> None:
     assert cut is not None
     assert cut.thc_lift_mm > 0.3
     assert loop.seq.safe_z_mm == pytest.approx(before + cut.thc_lift_mm, abs=0.05)
+
+
+def test_auto_voltage_samples_the_target_at_speed() -> None:
+    """G200 V0: the target is sampled once at speed after the THC delay, near the true value."""
+    loop = ready(cut_voltage_v=None)
+    started, ok, _ = loop.cut(*SQUARE)
+    assert started.ok
+    assert ok
+    target = loop.seq.thc.target_v
+    assert target is not None
+    assert target == pytest.approx(125.0, abs=1.0)  # flat_clean: 125 V at 1.5 mm
+    assert loop.plant.truth.summary().cuts[0].height_rms_error_mm < 0.1
+
+
+def test_puddle_jump_answers_m3_early_and_then_lowers_to_cut_height() -> None:
+    """With a puddle jump, XY may start at the puddle height; Z then goes to cut height."""
+    loop = ready(config=SequenceConfig(puddle_height_percent=150.0, puddle_delay_s=0.2))
+    reply = loop.m3()
+    assert reply.ok
+    assert loop.seq.state is State.PUDDLE_JUMP
+    assert loop.run_until(lambda: loop.seq.state is State.CUTTING, 3)
+    loop.run_until(lambda: loop.plant.zaxis.is_idle, 2)
+    assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.1)
+
+
+def test_mode_0_derives_arc_ok_from_the_voltage() -> None:
+    """PlasmaC mode 0: no arc-OK input needed; a stable voltage in the window is arc OK."""
+    from dthc_bridge.controller.commands import ThcMode
+
+    loop = ready()
+    loop.seq.mode = ThcMode.VOLTAGE_ONLY
+    started, ok, ended = loop.cut(*SQUARE)
+    assert started.ok
+    assert ok
+    assert ended.ok
+    assert loop.plant.truth.summary().cuts[0].dives == 0
+
+
+def test_mode_2_follows_the_external_boxs_up_down_outputs() -> None:
+    """PlasmaC mode 2: Z follows the THC box's up/down outputs on a warped sheet."""
+    from dthc_bridge.controller.commands import ThcMode
+
+    loop = ready("warped_sheet")
+    loop.seq.mode = ThcMode.ARC_OK_AND_UPDOWN
+    loop.plant.gantry.feed_line("G0 X100 Y100")
+    loop.run_until(lambda: loop.plant.gantry.idle, 10)
+    started, ok, _ = loop.cut("G1 X700 Y100 F6000")
+    assert started.ok
+    assert ok
+    cut = loop.plant.truth.summary().cuts[-1]
+    assert cut.dives == 0
+    assert cut.height_rms_error_mm < 0.3
+    assert any(v != 0.0 for v in loop.velocities)
