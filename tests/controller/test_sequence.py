@@ -274,7 +274,7 @@ def test_puddle_jump_answers_m3_early_and_then_lowers_to_cut_height() -> None:
     loop = ready(config=SequenceConfig(puddle_height_percent=150.0, puddle_delay_s=0.2))
     reply = loop.m3()
     assert reply.ok
-    assert loop.seq.state is State.PUDDLE_JUMP
+    assert str(loop.seq.state) == "puddle_jump"
     assert loop.run_until(lambda: loop.seq.state is State.CUTTING, 3)
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 2)
     assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.1)
