@@ -1,0 +1,457 @@
+"""``dthc-bridge install-service`` and ``uninstall-service``: deploy the daemon on a shop PC.
+
+Installing creates the system user and group (``dthc``, also in ``dialout``), writes the
+unit to /etc/systemd/system, the udev rules to /etc/udev/rules.d and the example
+configuration to /etc/dthc-bridge/config.toml (only if there is none), reloads udev and
+systemd, and enables and starts the service. Every step is idempotent, so re-running the
+installer (after an upgrade, or with the board's real ``--serial``) is the way to update.
+
+``--dry-run`` prints every step without doing it; ``--root DIR`` writes the files under a
+staging directory and runs no command. Uninstalling removes the unit and the rules and
+keeps the configuration, the state and the user unless ``--purge`` is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import grp
+import os
+import pwd
+import shutil
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+import dthc_bridge
+
+from .actions import (
+    Command,
+    Context,
+    MakeDir,
+    Note,
+    RemoveFile,
+    RemoveTree,
+    Runner,
+    StartService,
+    Step,
+    WriteFile,
+    run_command,
+)
+from .render import (
+    BOARD_SYMLINK,
+    DEFAULT_PID,
+    DEFAULT_VID,
+    BoardIds,
+    DeployError,
+    example_config,
+    render_udev_rules,
+    render_unit,
+    validate_account_name,
+)
+
+__all__ = [
+    "CONFIG_DIR",
+    "CONFIG_PATH",
+    "DEFAULT_USER",
+    "RULES_PATH",
+    "STATE_DIR",
+    "UNIT_NAME",
+    "UNIT_PATH",
+    "HostState",
+    "InstallOptions",
+    "UninstallOptions",
+    "add_install_arguments",
+    "add_uninstall_arguments",
+    "install_service",
+    "plan_install",
+    "plan_uninstall",
+    "run_install",
+    "run_uninstall",
+    "uninstall_service",
+]
+
+UNIT_NAME = "dthc-bridge.service"
+UNIT_PATH = f"/etc/systemd/system/{UNIT_NAME}"
+RULES_PATH = "/etc/udev/rules.d/99-dthc.rules"
+CONFIG_DIR = "/etc/dthc-bridge"
+CONFIG_PATH = f"{CONFIG_DIR}/config.toml"
+STATE_DIR = "/var/lib/dthc-bridge"
+DEFAULT_USER = "dthc"
+SERIAL_GROUP = "dialout"
+"""Debian's owner group of /dev/ttyACM* and /dev/ttyUSB*."""
+
+# Compared against, never written to.
+HIDDEN_FROM_SERVICE = ("/home", "/root", "/run/user", "/tmp", "/var/tmp")  # noqa: S108
+"""Trees the unit's ProtectHome=yes and PrivateTmp=yes hide from the daemon."""
+
+UDEV_SUBSYSTEMS = ("tty", "usb", "usb-serial")
+
+
+def default_bin_dir() -> Path:
+    """The bin directory of the environment this installer runs from."""
+    return Path(sys.prefix) / "bin"
+
+
+@dataclass(frozen=True)
+class InstallOptions:
+    root: Path = Path("/")
+    dry_run: bool = False
+    start: bool = True
+    user: str = DEFAULT_USER
+    bin_dir: Path = field(default_factory=default_bin_dir)
+    board: BoardIds = field(default_factory=BoardIds)
+
+
+@dataclass(frozen=True)
+class UninstallOptions:
+    root: Path = Path("/")
+    dry_run: bool = False
+    purge: bool = False
+    user: str = DEFAULT_USER
+
+
+@dataclass(frozen=True)
+class HostState:
+    """What the installer needs to know about the machine it runs on."""
+
+    user_exists: bool
+    group_exists: bool
+    serial_group_exists: bool
+    user_in_serial_group: bool
+    systemd_booted: bool
+    has_udevadm: bool
+
+    @classmethod
+    def probe(cls, user: str) -> HostState:
+        serial_members: list[str] | None
+        try:
+            serial_members = grp.getgrnam(SERIAL_GROUP).gr_mem
+        except KeyError:
+            serial_members = None
+        return cls(
+            user_exists=_user_exists(user),
+            group_exists=_group_exists(user),
+            serial_group_exists=serial_members is not None,
+            user_in_serial_group=serial_members is not None and user in serial_members,
+            # sd_booted(3): this directory exists only when systemd is PID 1.
+            systemd_booted=Path("/run/systemd/system").is_dir(),
+            has_udevadm=shutil.which("udevadm") is not None,
+        )
+
+
+# ---------------------------------------------------------------------------- install
+
+
+def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
+    """Every step of an installation, in order (pure: nothing is done here)."""
+    user = validate_account_name(options.user)
+    group = user
+    unit = render_unit(bin_dir=options.bin_dir, user=user, group=group)
+    rules = render_udev_rules(options.board, group=group)
+    steps: list[Step] = [
+        *_account_steps(user, host),
+        WriteFile(UNIT_PATH, unit, 0o644),
+        WriteFile(RULES_PATH, rules, 0o644),
+        MakeDir(CONFIG_DIR, 0o750, group=group),
+        WriteFile(CONFIG_PATH, example_config(), 0o640, group=group, replace=False),
+        Command(("udevadm", "control", "--reload"), "udev", if_changed=(RULES_PATH,)),
+        Command(
+            ("udevadm", "trigger", "--action=change", *_subsystem_matches()),
+            "udev",
+            if_changed=(RULES_PATH,),
+        ),
+        Command(("systemctl", "daemon-reload"), "systemd", if_changed=(UNIT_PATH,)),
+        Command(("systemctl", "enable", UNIT_NAME), "systemd"),
+    ]
+    if options.start:
+        steps.append(StartService(UNIT_NAME, restart_if_changed=(UNIT_PATH,)))
+    else:
+        steps.append(Note(f"not started (--no-start): systemctl start {UNIT_NAME}"))
+    return steps
+
+
+def _subsystem_matches() -> tuple[str, ...]:
+    return tuple(f"--subsystem-match={name}" for name in UDEV_SUBSYSTEMS)
+
+
+def _account_steps(user: str, host: HostState) -> list[Step]:
+    common = (
+        "--system", "--no-create-home", "--home-dir", STATE_DIR,
+        "--shell", "/usr/sbin/nologin", "--comment", "dthc-bridge daemon",
+    )  # fmt: skip
+    groups = ("--groups", SERIAL_GROUP) if host.serial_group_exists else ()
+    if host.user_exists:
+        steps: list[Step] = [Note(f"user {user} exists", status="exists")]
+        if not host.group_exists:
+            steps.append(Command(("groupadd", "--system", user), "host"))
+        if host.serial_group_exists and not host.user_in_serial_group:
+            steps.append(Command(("usermod", "--append", "--groups", SERIAL_GROUP, user), "host"))
+        return steps
+    primary = ("--gid", user) if host.group_exists else ("--user-group",)
+    return [Command(("useradd", *common, *primary, *groups, user), "host")]
+
+
+def _preflight(options: InstallOptions) -> tuple[list[str], list[str]]:
+    """(problems, notes): problems stop a live install and are warnings otherwise."""
+    problems: list[str] = []
+    notes: list[str] = []
+    executable = options.bin_dir / "dthc-bridge"
+    if not os.access(executable, os.X_OK):
+        problems.append(
+            f"{executable} is missing or not executable: run the installer with the "
+            "environment's own dthc-bridge, or pass --bin-dir"
+        )
+    interpreter = options.bin_dir / "python3"
+    looked_at = [("the daemon's environment", options.bin_dir)]
+    if interpreter.exists():
+        looked_at.append(("its Python interpreter", interpreter.resolve()))
+    looked_at.append(("the dthc_bridge package", Path(dthc_bridge.__file__).resolve().parent))
+    for what, path in looked_at:
+        hidden = _hidden_prefix(path)
+        if hidden is not None:
+            problems.append(
+                f"{what} is under {hidden} ({path}), which the service cannot see "
+                "(ProtectHome=yes, PrivateTmp=yes): create the environment from the system "
+                "Python under /opt, e.g. /usr/bin/python3 -m venv /opt/dthc-bridge/.venv"
+            )
+    board = options.board
+    if (board.vid, board.pid) == (DEFAULT_VID, DEFAULT_PID):
+        notes.append(
+            f"board ids {board.vid}:{board.pid} are the placeholder: pass --vid/--pid "
+            "(see lsusb) when the board's firmware reports its own"
+        )
+    chip = board.bridge_chip
+    if chip is not None and board.serial is None:
+        notes.append(
+            f"{board.vid}:{board.pid} is a generic {chip} bridge: without --serial, "
+            f"/dev/{BOARD_SYMLINK} and the service group go to every such adapter on this PC"
+        )
+    return problems, notes
+
+
+def install_service(
+    options: InstallOptions,
+    *,
+    out: TextIO | None = None,
+    err: TextIO | None = None,
+    host: HostState | None = None,
+    runner: Runner = run_command,
+) -> int:
+    """Install (or update) the service; 0 on success, 1 with a message on ``err``."""
+    out = sys.stdout if out is None else out
+    err = sys.stderr if err is None else err
+    try:
+        live = options.root == Path("/")
+        _require_root(live=live, dry_run=options.dry_run, command="install-service")
+        problems, notes = _preflight(options)
+        if problems and live and not options.dry_run:
+            raise DeployError("\n  ".join(problems))
+        host = HostState.probe(options.user) if host is None else host
+        steps = plan_install(options, host)
+        out.write(_heading("install-service", options.root, options.dry_run))
+        for text in problems:
+            out.write(f"  warning: {text}\n")
+        for text in notes:
+            out.write(f"  note: {text}\n")
+        _apply(steps, root=options.root, dry_run=options.dry_run, out=out, host=host, runner=runner)
+    except DeployError as exc:
+        err.write(f"dthc-bridge install-service: error: {exc}\n")
+        return 1
+    if live and not options.dry_run:
+        out.write(
+            f"done. Edit {CONFIG_PATH}, then: systemctl restart dthc-bridge; "
+            "systemctl status dthc-bridge; journalctl -u dthc-bridge -f\n"
+        )
+    return 0
+
+
+# -------------------------------------------------------------------------- uninstall
+
+
+def plan_uninstall(options: UninstallOptions, host: HostState) -> list[Step]:
+    """Every step of an uninstallation, in order (pure)."""
+    user = validate_account_name(options.user)
+    steps: list[Step] = [
+        Command(("systemctl", "disable", "--now", UNIT_NAME), "systemd", if_exists=UNIT_PATH),
+        RemoveFile(UNIT_PATH),
+        RemoveFile(RULES_PATH),
+        Command(("systemctl", "daemon-reload"), "systemd", if_changed=(UNIT_PATH,)),
+        Command(("udevadm", "control", "--reload"), "udev", if_changed=(RULES_PATH,)),
+    ]
+    if not options.purge:
+        steps.append(Note(f"kept {CONFIG_DIR}, {STATE_DIR} and user {user} (--purge removes them)"))
+        return steps
+    steps += [RemoveTree(CONFIG_DIR), RemoveTree(STATE_DIR)]
+    if host.user_exists:
+        steps.append(Command(("userdel", user), "host"))
+    # userdel removes a user's own group itself; whatever is left goes here.
+    steps.append(Command(("groupdel", user), "host", when=lambda: _group_exists(user)))
+    return steps
+
+
+def uninstall_service(
+    options: UninstallOptions,
+    *,
+    out: TextIO | None = None,
+    err: TextIO | None = None,
+    host: HostState | None = None,
+    runner: Runner = run_command,
+) -> int:
+    """Remove the service; 0 on success, 1 with a message on ``err``."""
+    out = sys.stdout if out is None else out
+    err = sys.stderr if err is None else err
+    try:
+        live = options.root == Path("/")
+        _require_root(live=live, dry_run=options.dry_run, command="uninstall-service")
+        host = HostState.probe(options.user) if host is None else host
+        steps = plan_uninstall(options, host)
+        out.write(_heading("uninstall-service", options.root, options.dry_run))
+        _apply(steps, root=options.root, dry_run=options.dry_run, out=out, host=host, runner=runner)
+    except DeployError as exc:
+        err.write(f"dthc-bridge uninstall-service: error: {exc}\n")
+        return 1
+    return 0
+
+
+# ---------------------------------------------------------------------------- argparse
+
+
+def add_install_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``install-service`` options."""
+    _add_common_arguments(parser)
+    parser.add_argument(
+        "--no-start", action="store_true", help="enable the service but do not (re)start it"
+    )
+    parser.add_argument(
+        "--bin-dir",
+        type=Path,
+        default=None,
+        help="bin directory holding the dthc-bridge executable (default: this environment's)",
+    )
+    parser.add_argument(
+        "--vid", default=DEFAULT_VID, help=f"board USB vendor id, hex (default {DEFAULT_VID})"
+    )
+    parser.add_argument(
+        "--pid", default=DEFAULT_PID, help=f"board USB product id, hex (default {DEFAULT_PID})"
+    )
+    parser.add_argument(
+        "--serial",
+        default=None,
+        help=f"board USB serial number: /dev/{BOARD_SYMLINK} then names only that board",
+    )
+
+
+def add_uninstall_arguments(parser: argparse.ArgumentParser) -> None:
+    """The ``uninstall-service`` options."""
+    _add_common_arguments(parser)
+    parser.add_argument(
+        "--purge",
+        action="store_true",
+        help=f"also remove {CONFIG_DIR} (the configuration), {STATE_DIR} and the user",
+    )
+
+
+def run_install(args: argparse.Namespace) -> int:
+    """``install-service`` from parsed arguments (see :func:`add_install_arguments`)."""
+    try:
+        board = BoardIds.parse(args.vid, args.pid, args.serial)
+    except DeployError as exc:
+        sys.stderr.write(f"dthc-bridge install-service: error: {exc}\n")
+        return 2
+    options = InstallOptions(
+        root=args.root,
+        dry_run=args.dry_run,
+        start=not args.no_start,
+        user=args.user,
+        bin_dir=default_bin_dir() if args.bin_dir is None else args.bin_dir.absolute(),
+        board=board,
+    )
+    return install_service(options)
+
+
+def run_uninstall(args: argparse.Namespace) -> int:
+    """``uninstall-service`` from parsed arguments (see :func:`add_uninstall_arguments`)."""
+    options = UninstallOptions(
+        root=args.root, dry_run=args.dry_run, purge=args.purge, user=args.user
+    )
+    return uninstall_service(options)
+
+
+def _add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--root",
+        type=_root_dir,
+        default=Path("/"),
+        metavar="DIR",
+        help="write the files under DIR (a staging root) and run no command",
+    )
+    parser.add_argument("--dry-run", action="store_true", help="print every step without doing it")
+    parser.add_argument(
+        "--user",
+        default=DEFAULT_USER,
+        help=f"service user and group (default {DEFAULT_USER})",
+    )
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _apply(
+    steps: list[Step], *, root: Path, dry_run: bool, out: TextIO, host: HostState, runner: Runner
+) -> None:
+    ctx = Context(
+        root=root,
+        live=root == Path("/"),
+        dry_run=dry_run,
+        out=out,
+        runner=runner,
+        systemd_booted=host.systemd_booted,
+        has_udevadm=host.has_udevadm,
+    )
+    for step in steps:
+        step.apply(ctx)
+
+
+def _require_root(*, live: bool, dry_run: bool, command: str) -> None:
+    if live and not dry_run and os.geteuid() != 0:
+        raise DeployError(
+            f"{command} changes /etc and the system's accounts: run it as root "
+            f"(sudo {sys.prefix}/bin/dthc-bridge {command} ...), preview it with --dry-run, "
+            "or stage the files with --root DIR"
+        )
+
+
+def _heading(command: str, root: Path, dry_run: bool) -> str:
+    where = "this system" if root == Path("/") else f"staging root {root}"
+    return f"dthc-bridge {command}: {where}{' (dry run: nothing is changed)' if dry_run else ''}\n"
+
+
+def _root_dir(text: str) -> Path:
+    path = Path(text).absolute()
+    if path != Path("/") and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: not a directory")
+    return path
+
+
+def _hidden_prefix(path: Path) -> str | None:
+    for prefix in HIDDEN_FROM_SERVICE:
+        if path == Path(prefix) or Path(prefix) in path.parents:
+            return prefix
+    return None
+
+
+def _user_exists(name: str) -> bool:
+    try:
+        pwd.getpwnam(name)
+    except KeyError:
+        return False
+    return True
+
+
+def _group_exists(name: str) -> bool:
+    try:
+        grp.getgrnam(name)
+    except KeyError:
+        return False
+    return True
