@@ -149,10 +149,13 @@ class BoardClient:
         self, target_mm: float, feed_mm_s: float, timeout_s: float = 10.0
     ) -> fp.MotionDone:
         """Move Z and wait for the board to report the move ended."""
-        return await self._run_until_report(
-            fp.ZMove(0, _um(target_mm), _um(feed_mm_s)), fp.MotionDone,
-            fp.QueryWhat.MOTION_DONE, timeout_s,
-        )  # fmt: skip
+        seq = await self.start_move_z(target_mm, feed_mm_s)
+        return await self.wait_report(fp.MotionDone, seq, timeout_s)
+
+    async def start_move_z(self, target_mm: float, feed_mm_s: float) -> int:
+        """Start a Z move; returns its seq once the board accepted it (ACK)."""
+        ack = await self._session().request(fp.ZMove(0, _um(target_mm), _um(feed_mm_s)))
+        return ack.seq
 
     async def probe(
         self,
@@ -162,17 +165,19 @@ class BoardClient:
         timeout_s: float = 20.0,
     ) -> fp.ProbeResult:
         """Probe down; the board stops on contact by itself and reports where."""
-        return await self._run_until_report(
-            fp.ZProbe(0, _um(feed_mm_s), _um(max_travel_mm), sensors), fp.ProbeResult,
-            fp.QueryWhat.PROBE_RESULT, timeout_s,
-        )  # fmt: skip
+        seq = await self.start_probe(feed_mm_s, max_travel_mm, sensors)
+        return await self.wait_report(fp.ProbeResult, seq, timeout_s)
 
-    async def _run_until_report(
-        self, command: fp.Message, report: type[_Report], what: int, timeout_s: float
-    ) -> _Report:
+    async def start_probe(self, feed_mm_s: float, max_travel_mm: float, sensors: int) -> int:
+        """Start a probe; returns its seq once the board accepted it (ACK)."""
+        command = fp.ZProbe(0, _um(feed_mm_s), _um(max_travel_mm), sensors)
+        ack = await self._session().request(command)
+        return ack.seq
+
+    async def wait_report(self, report: type[_Report], seq: int, timeout_s: float) -> _Report:
+        """Wait for the completion report of the command ``seq`` (MOTION_DONE/PROBE_RESULT)."""
         session = self._session()
-        ack = await session.request(command)
-        key = (report, ack.seq)  # the completion carries the seq of the command it ends
+        key = (report, seq)  # the completion carries the seq of the command it ends
         found = self._recent.pop(key, None)
         if isinstance(found, report):
             return found
@@ -192,9 +197,10 @@ class BoardClient:
         if session.lost in done:
             raise session.lost.result()
         # The completion report may have been lost on the way: if Z has stopped, ask for it.
+        what = fp.QueryWhat.MOTION_DONE if report is fp.MotionDone else fp.QueryWhat.PROBE_RESULT
         status = await self.status()
         if not status.status & fp.StatusBit.Z_BUSY:
             queried = await session.request(fp.Query(0, what))
             if isinstance(queried, report):
-                return queried._replace(seq=ack.seq)
-        raise RequestTimeout(type(command).__name__, 1, timeout_s)
+                return queried._replace(seq=seq)
+        raise RequestTimeout(report.__name__, 1, timeout_s)

@@ -454,6 +454,11 @@ class CutSequence:
         if self.busy:
             self._fault(f"board link down: {reason}")
 
+    def abort(self, reason: str) -> None:
+        """Stop a running cut the safe way (sender lost, shutdown): the fault path."""
+        if self.busy:
+            self._fault(reason)
+
     def on_action_failed(self, action: act.Action, error: str) -> None:
         if isinstance(action, act.Torch) and not action.on:
             return  # the board turns the torch off on any fault by itself

@@ -1,0 +1,143 @@
+"""The daemon's configuration: one closed, typed model read from TOML, env overrides on top.
+
+Unknown keys are refused with the exact key named; bounds sit beside each field.
+Environment variables override the file: ``DTHC_MQTT__HOST=broker`` sets ``[mqtt] host``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+
+from .controller.commands import ThcMode
+from .controller.sequence import SequenceConfig
+from .controller.thc import ThcConfig
+from .link import LinkTiming
+from .mqtt.settings import MqttSettings
+
+__all__ = ["ConfigError", "DaemonConfig", "load_config"]
+
+
+class _Closed(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class BoardSettings(_Closed):
+    link: str = Field("/dev/dthc0", description="/dev/..., socket://HOST:PORT or usb://VID:PID")
+    baudrate: int = Field(921_600, ge=9600, le=12_000_000)
+    lease_ms: int = Field(250, ge=20, le=2000)
+    ack_timeout_ms: float = Field(25.0, ge=2.0, le=2000.0)
+    max_attempts: int = Field(5, ge=1, le=20)
+    sample_rate_hz: int = Field(1000, ge=100, le=20_000)
+    batch_size: int = Field(5, ge=1, le=100)
+    filter: Literal["none", "moving_average", "low_pass", "median3"] = "median3"
+    filter_param: int = Field(0, ge=0, le=500)
+    arc_lost_ms: int = Field(0, ge=0, le=1000, description="board-side arc-lost latch; 0 = off")
+    cal_offset: int = 0
+    cal_scale: float = Field(0.01, gt=0.0, description="volts per raw count")
+
+    def timing(self) -> LinkTiming:
+        return LinkTiming(
+            ack_timeout_s=self.ack_timeout_ms / 1000.0,
+            max_attempts=self.max_attempts,
+            lease_ms=self.lease_ms,
+        )
+
+
+class ThcSettings(_Closed):
+    kp_per_s: float = Field(14.0, gt=0.0, le=100.0)
+    ki_per_s2: float = Field(40.0, ge=0.0, le=1000.0)
+    deadband_v: float = Field(0.3, ge=0.0, le=5.0)
+    lowpass_hz: float = Field(40.0, gt=0.0, le=500.0)
+    slope_v_per_mm: float = Field(7.5, gt=1.0, le=20.0)
+    max_speed_mm_s: float = Field(30.0, gt=0.0, le=100.0)
+    max_accel_mm_s2: float = Field(500.0, gt=0.0, le=5000.0)
+    void_slope_v_s: float = Field(250.0, gt=0.0)
+
+    def build(self) -> ThcConfig:
+        return ThcConfig(**self.model_dump())
+
+
+class ControllerSettings(_Closed):
+    mode: Literal[0, 1, 2] = 1
+    probe_height_mm: float = Field(25.0, gt=0.0, le=200.0)
+    float_travel_mm: float = Field(1.5, ge=0.0, le=10.0)
+    ohmic_offset_mm: float = Field(0.0, ge=-5.0, le=5.0)
+    ohmic_retries: int = Field(1, ge=0, le=5)
+    arc_ok_timeout_s: float = Field(3.0, gt=0.0, le=10.0)
+    arc_start_attempts: int = Field(3, ge=1, le=10)
+    arc_retry_delay_s: float = Field(1.0, ge=0.0, le=10.0)
+    arc_lost_delay_s: float = Field(0.02, ge=0.0, le=1.0)
+    thc_delay_s: float = Field(1.0, ge=0.0, le=9.0)
+    safe_height_mm: float = Field(20.0, gt=0.0, le=100.0)
+    pause_at_end_s: float = Field(0.0, ge=0.0, le=5.0)
+    puddle_height_percent: float = Field(100.0, ge=50.0, le=300.0)
+    puddle_delay_s: float = Field(0.0, ge=0.0, le=5.0)
+    ihs_skip_distance_mm: float = Field(0.0, ge=0.0, le=1000.0)
+    ihs_skip_type: Literal[0, 1] = 0
+    dry_run: bool = False
+    thc: ThcSettings = ThcSettings()
+
+    def sequence(self) -> SequenceConfig:
+        fields = self.model_dump(exclude={"mode", "thc"})
+        return SequenceConfig(**fields)
+
+    @property
+    def thc_mode(self) -> ThcMode:
+        return ThcMode(self.mode)
+
+
+class LoggingSettings(_Closed):
+    level: Literal["debug", "info", "warning", "error"] = "info"
+    json_logs: bool | None = Field(None, description="None: JSON when stderr is not a TTY")
+
+
+class DaemonConfig(BaseSettings):
+    model_config = SettingsConfigDict(
+        env_prefix="DTHC_", env_nested_delimiter="__", extra="forbid", frozen=True
+    )
+
+    board: BoardSettings = BoardSettings()
+    mqtt: MqttSettings = MqttSettings()
+    controller: ControllerSettings = ControllerSettings()
+    logging: LoggingSettings = LoggingSettings()
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        # The environment overrides the file (the file's values arrive as init arguments).
+        return (env_settings, init_settings)
+
+
+class ConfigError(Exception):
+    """The configuration cannot be used; the message names the file and the exact key."""
+
+
+def load_config(path: Path | None) -> DaemonConfig:
+    data: dict[str, Any] = {}
+    if path is not None:
+        try:
+            data = tomllib.loads(path.read_text())
+        except OSError as exc:
+            raise ConfigError(f"{path}: {exc.strerror or exc}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    try:
+        return DaemonConfig(**data)
+    except ValidationError as exc:
+        problems = []
+        for error in exc.errors():
+            key = ".".join(str(part) for part in error["loc"])
+            problems.append(f"{key}: {error['msg']}")
+        where = str(path) if path else "environment"
+        raise ConfigError(f"{where}: " + "; ".join(problems)) from None

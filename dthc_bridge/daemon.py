@@ -1,0 +1,107 @@
+"""``dthc-bridge run``: the daemon process. One TaskGroup of named tasks.
+
+    link        LinkSupervisor: board connection, handshake, reconnect
+    controller  ControllerService: board actions in order
+    mqtt        MqttGateway: requests, responses, state, events, telemetry
+    watchdog    sd_notify WATCHDOG=1 while the event loop is healthy (under systemd)
+
+SIGTERM/SIGINT: abort any cut, torch off, then a clean exit within a second.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+
+import structlog
+
+import firmware_protocol as fp
+
+from .board import BoardClient
+from .config import DaemonConfig
+from .controller.plasma import PlasmaController
+from .controller.sequence import CutSequence
+from .controller.thc import ThcController
+from .deploy.sdnotify import SdNotifier
+from .link import LinkSupervisor
+from .mqtt.gateway import MqttGateway
+from .service import ControllerService
+
+__all__ = ["run_daemon"]
+
+log = structlog.get_logger("dthc_bridge.daemon")
+
+_FILTERS = {
+    "none": fp.FilterKind.NONE,
+    "moving_average": fp.FilterKind.MOVING_AVERAGE,
+    "low_pass": fp.FilterKind.LOW_PASS,
+    "median3": fp.FilterKind.MEDIAN3,
+}
+
+
+def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
+    """The board link and the controller service, wired as the configuration says."""
+    board = config.board
+    supervisor = LinkSupervisor(board.link, board.timing(), baudrate=board.baudrate)
+    client = BoardClient(supervisor)
+    sequence = CutSequence(
+        config.controller.sequence(), ThcController(config.controller.thc.build())
+    )
+    sequence.mode = config.controller.thc_mode
+
+    async def setup(client: BoardClient) -> None:
+        await client.configure(
+            sample_rate_hz=board.sample_rate_hz,
+            batch_size=board.batch_size,
+            filter_kind=_FILTERS[board.filter],
+            filter_param=board.filter_param,
+            arc_lost_ms=board.arc_lost_ms,
+            cal_offset=board.cal_offset,
+            cal_scale=board.cal_scale,
+        )
+
+    service = ControllerService(
+        PlasmaController(sequence), supervisor, client, board_setup=setup,
+        # A backstop only: the gateway's request deadline cancels (and so aborts) first.
+        command_timeout_s=config.mqtt.request_deadline_s + 5.0,
+    )  # fmt: skip
+    return supervisor, service
+
+
+async def run_daemon(config: DaemonConfig) -> int:
+    with SdNotifier.from_env() as notifier:
+        return await _run(config, notifier)
+
+
+async def _run(config: DaemonConfig, notifier: SdNotifier) -> int:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop.set)
+    supervisor, service = build_service(config)
+    gateway = MqttGateway(config.mqtt, service)
+    log.info("starting", link=config.board.link, broker=f"{config.mqtt.host}:{config.mqtt.port}")
+    try:
+        async with asyncio.TaskGroup() as group:
+            tasks = [
+                group.create_task(supervisor.run(), name="link"),
+                group.create_task(service.run(), name="controller"),
+                group.create_task(gateway.run(), name="mqtt"),
+            ]
+            if notifier.watchdog_period_s() is not None:
+                tasks.append(group.create_task(notifier.watchdog_loop(), name="watchdog"))
+            notifier.ready()
+            notifier.status("running")
+            await stop.wait()
+            log.info("stopping")
+            notifier.stopping()
+            await asyncio.wait_for(service.shutdown(), 0.7)
+            for task in tasks:
+                task.cancel()
+    finally:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            with contextlib.suppress(Exception):
+                loop.remove_signal_handler(sig)
+    log.info("stopped")
+    return 0

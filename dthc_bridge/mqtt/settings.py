@@ -1,0 +1,105 @@
+"""MQTT gateway settings: one closed, typed model; the daemon embeds it as ``[mqtt]``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal, Self
+
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
+
+from .topics import Topics, filter_error, topic_matches
+
+__all__ = ["MqttSettings", "MqttTls"]
+
+
+class MqttTls(BaseModel):
+    """TLS to the broker; without ``ca_file`` the system's CA store is used."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    ca_file: Path | None = None
+    cert_file: Path | None = Field(default=None, description="client certificate (with key_file)")
+    key_file: Path | None = None
+    insecure: bool = Field(
+        default=False, description="skip the broker's hostname check (testing only)"
+    )
+
+    @model_validator(mode="after")
+    def _cert_and_key_together(self) -> Self:
+        if (self.cert_file is None) != (self.key_file is None):
+            raise ValueError("cert_file and key_file must be given together")
+        return self
+
+
+class MqttSettings(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    host: str = Field(default="localhost", min_length=1, max_length=253)
+    port: int = Field(default=1883, ge=1, le=65535)
+    username: str | None = Field(default=None, min_length=1, max_length=256)
+    password: SecretStr | None = None
+    tls: MqttTls | None = None
+    protocol: Literal["3.1.1", "5"] = "5"
+    keepalive_s: int = Field(default=30, ge=5, le=3600)
+    operation_timeout_s: float = Field(
+        default=10.0, gt=0.0, le=120.0, description="CONNACK, SUBACK and PUBACK wait"
+    )
+    base_topic: str = Field(
+        default="dthc", min_length=1, max_length=128, pattern=r"^[^/+#\x00]+(/[^/+#\x00]+)*$"
+    )
+    board_id: str = Field(default="table1", pattern=r"^[A-Za-z0-9_-]+$", max_length=64)
+    client_id: str | None = Field(
+        default=None, min_length=1, max_length=128, description="default: dthc-bridge-<board_id>"
+    )
+    telemetry_hz: float = Field(default=10.0, ge=0.0, le=50.0, description="0 turns telemetry off")
+    state_poll_s: float = Field(default=0.1, ge=0.01, le=5.0)
+    diagnostics_period_s: float = Field(default=5.0, ge=0.1, le=3600.0)
+    request_deadline_s: float = Field(default=30.0, gt=0.0, le=3600.0)
+    max_payload_bytes: int = Field(default=4096, ge=256, le=1_048_576)
+    max_concurrent_requests: int = Field(default=16, ge=1, le=256)
+    max_pending_requests: int = Field(default=64, ge=1, le=4096, description="beyond this: 'busy'")
+    sender_will_topic: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=512,
+        description="filter where the sender's will arrives",
+    )
+    reconnect_initial_s: float = Field(default=0.5, ge=0.01, le=60.0)
+    reconnect_max_s: float = Field(default=30.0, ge=0.01, le=3600.0)
+    outbox_hold_s: float = Field(
+        default=60.0,
+        gt=0.0,
+        le=3600.0,
+        description="how long responses and events wait for the broker",
+    )
+    outbox_max_messages: int = Field(default=1000, ge=10, le=100_000)
+
+    @field_validator("sender_will_topic")
+    @classmethod
+    def _valid_filter(cls, value: str | None) -> str | None:
+        if value is not None and (error := filter_error(value)) is not None:
+            raise ValueError(error)
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> Self:
+        if self.reconnect_max_s < self.reconnect_initial_s:
+            raise ValueError("reconnect_max_s must be >= reconnect_initial_s")
+        if self.max_pending_requests < self.max_concurrent_requests:
+            raise ValueError("max_pending_requests must be >= max_concurrent_requests")
+        if self.sender_will_topic is not None:
+            for own in self.topics.samples():
+                if topic_matches(self.sender_will_topic, own):
+                    raise ValueError(
+                        f"sender_will_topic {self.sender_will_topic!r} overlaps the "
+                        f"gateway's own topic {own!r}"
+                    )
+        return self
+
+    @property
+    def topics(self) -> Topics:
+        return Topics.for_board(self.base_topic, self.board_id)
+
+    @property
+    def effective_client_id(self) -> str:
+        return self.client_id or f"dthc-bridge-{self.board_id}"
