@@ -155,7 +155,7 @@ def persistent_broker(tmp_path: Path) -> Iterator[Broker]:
         instance.stop()
 
 
-ACL_EXAMPLE = Path(__file__).parents[2] / "dthc_bridge" / "mqtt" / "mosquitto-acl.example"
+ACL_EXAMPLE = Path(__file__).parents[2] / "systemd" / "mosquitto-acl.example"
 USERS = {"dthc-bridge": "bridge-secret", "sender": "sender-secret"}
 
 
