@@ -6,13 +6,12 @@ from pathlib import Path
 
 import pytest
 
+from dthc_bridge.bench.closed_loop import ClosedLoop
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.commands import CommandError
 from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.controller.sequence import State
-
-from .closed_loop import ClosedLoop
 
 HERE = Path(__file__).parent
 

@@ -6,12 +6,11 @@ from dataclasses import replace
 
 import pytest
 
+from dthc_bridge.bench.closed_loop import ClosedLoop
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import SequenceConfig, State
 from mock_device.plant import load_scenario
-
-from .closed_loop import ClosedLoop
 
 SQUARE = ("G1 X250 Y50 F5500", "G1 X250 Y150", "G1 X50 Y150", "G1 X50 Y50")
 

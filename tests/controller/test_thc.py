@@ -7,9 +7,9 @@ from dataclasses import replace
 
 import pytest
 
+from dthc_bridge.bench.closed_loop import ClosedLoop
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
 
-from .closed_loop import ClosedLoop
 from .test_sequence import ready
 
 PERIOD = 0.001

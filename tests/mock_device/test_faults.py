@@ -5,9 +5,8 @@ from __future__ import annotations
 import firmware_protocol as fp
 from mock_device.faults import FaultPlan
 from mock_device.sim import SimulatedBoard
+from mock_device.sim_host import SimHost
 from mock_device.variants import DuplicatesActedTwice, LeaseIgnored, WrongCrcVariant
-
-from .sim_host import SimHost
 
 
 def _decode(board: SimulatedBoard, ms: int) -> fp.StreamDecoder:

@@ -9,8 +9,7 @@ import pytest
 import firmware_protocol as fp
 from firmware_protocol import FaultCode, InputBit, NakCode
 from mock_device.sim import SimulatedBoard
-
-from .sim_host import SimHost
+from mock_device.sim_host import SimHost
 
 
 @pytest.fixture

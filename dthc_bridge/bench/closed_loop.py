@@ -15,7 +15,7 @@ from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State, with_board_limits
 from dthc_bridge.controller.thc import ThcConfig, ThcController
 from mock_device.sim import SimulatedBoard
-from tests.mock_device.sim_host import SimHost
+from mock_device.sim_host import SimHost
 
 SENSORS_OHMIC = 1 << fp.InputBit.OHMIC
 SENSORS_FLOAT = 1 << fp.InputBit.FLOAT
