@@ -30,8 +30,25 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, help="TOML configuration file")
     check = sub.add_parser("check-config", help="validate a configuration file")
     check.add_argument("file", type=Path)
-    demo = sub.add_parser("demo", help="run the demo against the mock board")
+    demo = sub.add_parser("demo", help="run everything end to end on embedded defaults")
     demo.add_argument("--json", action="store_true", help="print one JSON object")
+    demo.add_argument(
+        "--program",
+        default="masso_sample",
+        choices=["masso_sample", "rosetta_g100", "holes_corners"],
+    )
+    demo.add_argument("--plot", type=Path, help="PNG to write (default out/demo.png)")
+    demo.add_argument("--broker", default="auto", choices=["auto", "mosquitto", "amqtt"])
+    send = sub.add_parser("send", help="send a G-code program to the daemon (reference sender)")
+    send.add_argument("program", type=Path)
+    send.add_argument("--broker", default="mqtt://localhost:1883", help="mqtt://HOST:PORT")
+    send.add_argument("--base-topic", default="dthc")
+    send.add_argument("--board-id", default="table1")
+    send.add_argument("--protocol", default="5", choices=["5", "3.1.1"])
+    send.add_argument("--backend", default="sim", choices=["sim"])
+    send.add_argument("--gantry", default="socket://127.0.0.1:7001", help="sim backend port")
+    send.add_argument("--start-line", type=int, default=1, help="e.g. a G100 P0 resume point")
+    send.add_argument("--json", action="store_true")
     conf = sub.add_parser(
         "conformance", help="check that a board honours the protocol and its safety rules"
     )
@@ -73,6 +90,39 @@ def _check(path: Path) -> int:
     return 0
 
 
+def _host_port(url: str, scheme: str) -> tuple[str, int]:
+    rest = url.removeprefix(scheme)
+    host, _, port = rest.rpartition(":")
+    if rest == url or not host or not port.isdigit():
+        raise SystemExit(f"expected {scheme}HOST:PORT, got {url!r}")
+    return host, int(port)
+
+
+async def _send(args: argparse.Namespace) -> int:
+    import json  # noqa: PLC0415
+
+    from .sender import DaemonClient, Sender, SimGantryBackend  # noqa: PLC0415
+
+    host, port = _host_port(args.broker, "mqtt://")
+    gantry_host, gantry_port = _host_port(args.gantry, "socket://")
+    lines = args.program.read_text().splitlines()
+    daemon = DaemonClient(
+        host, port, base_topic=args.base_topic, board_id=args.board_id, protocol=args.protocol
+    )
+    backend = SimGantryBackend(gantry_host, gantry_port)
+    async with daemon.connected():
+        report = await Sender(daemon, backend).run(lines, start_line=args.start_line)
+    await backend.close()
+    if args.json:
+        print(json.dumps(report.as_dict()))
+    elif report.ok:
+        print(f"done: {report.lines_sent} lines, {report.cuts_started} cuts")
+    else:
+        where = f"; resume from line {report.resume_from}" if report.resume_from else ""
+        print(f"stopped at line {report.error_line}: {report.error}{where}")
+    return 0 if report.ok else 1
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "run":
@@ -89,7 +139,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "demo":
         from .demo import run_demo  # noqa: PLC0415 - the demo pulls in subprocess machinery
 
-        return run_demo(as_json=args.json)
+        return run_demo(as_json=args.json, program=args.program, plot=args.plot, broker=args.broker)
+    if args.command == "send":
+        return asyncio.run(_send(args))
     if args.command == "bench":
         from firmware_protocol import bench  # noqa: PLC0415 - only the bench command needs it
 

@@ -271,6 +271,7 @@ class ControllerService:
             volts = [cv / 100 for cv in item.samples_cv]
             seq.on_samples(volts, item.period_us / 1e6, z_mm, xy, self._requested_feed_mm_s, now)
             self._telemetry = {
+                "t": round(now, 4),
                 "state": str(seq.state),
                 "voltage_v": seq.thc.filtered_v,
                 "target_v": seq.thc.target_v,

@@ -40,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="exit after this many board seconds")
     p.add_argument("--truth", type=Path, help="write ground truth here on exit (.csv/.jsonl)")
     p.add_argument("--program", type=Path, help="G-code whose motion lines the gantry runs")
+    p.add_argument(
+        "--gantry-listen", help="socket://HOST:PORT: JSON-lines control port for a sender's"
+        " motion backend (port 0 picks a free one; READY prints it)",
+    )  # fmt: skip
     p.add_argument("--default-program", action="store_true", help="run the scenario's path")
     f = p.add_argument_group("fault injection (SIGUSR1 unplugs, SIGUSR2 reboots)")
     f.add_argument("--bit-flip-rate", type=float, default=0.0, help="per byte")
@@ -96,7 +100,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         host, port = _parse_listen(args.listen)
         link = TcpLink(host, port, lambda _: None)
-    options = ProcessOptions(duration_s=args.duration, truth_path=args.truth, program=program)
+    gantry = _parse_listen(args.gantry_listen) if args.gantry_listen else None
+    options = ProcessOptions(
+        duration_s=args.duration, truth_path=args.truth, program=program, gantry=gantry
+    )
     return asyncio.run(MockBoardProcess(board, link, plan, options).run())
 
 

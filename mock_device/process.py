@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import signal
 import sys
@@ -18,6 +19,7 @@ from pathlib import Path
 import firmware_protocol as fp
 
 from .faults import FaultPlan
+from .gantry_server import GantryServer
 from .links import BoardLink
 from .sim import SimulatedBoard
 
@@ -31,6 +33,7 @@ class ProcessOptions:
     duration_s: float | None = None
     truth_path: Path | None = None
     program: tuple[str, ...] = ()
+    gantry: tuple[str, int] | None = None  # host, port of the gantry control port
 
 
 class MockBoardProcess:
@@ -46,6 +49,7 @@ class MockBoardProcess:
         self.reboots = 0
         self._unplug_task: asyncio.Task[None] | None = None
         self._stall_done = False
+        self._gantry: GantryServer | None = None
         link.on_bytes = self._host_bytes
 
     def _host_bytes(self, data: bytes) -> None:
@@ -109,8 +113,13 @@ class MockBoardProcess:
         for line in self.options.program:
             self.board.plant.gantry.feed_line(line)
         await self.link.open()
+        ready = f"READY {self.boot_hex}"
+        if self.options.gantry is not None:
+            self._gantry = GantryServer(self.board.plant, *self.options.gantry)
+            await self._gantry.start()
+            ready += f" gantry={self._gantry.bound_port}"
         self._log("ready", link=str(getattr(self.link, "path", "")), boot_id=self.boot_hex)
-        print(f"READY {self.boot_hex}", flush=True)
+        print(ready, flush=True)
         t0 = loop.time()
         fw_t0_us = self.board.firmware.t_us
         try:
@@ -134,6 +143,8 @@ class MockBoardProcess:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self.stop.wait(), max(0.0, wake - loop.time()))
         finally:
+            if self._gantry is not None:
+                await self._gantry.close()
             await self.link.close()
             if self._unplug_task is not None:
                 self._unplug_task.cancel()
@@ -155,8 +166,10 @@ class MockBoardProcess:
             else:
                 truth.write_jsonl(path)
         fw = self.board.firmware
+        summary = truth.summary()
         self._log(
             "exit",
+            cuts=[dataclasses.asdict(cut) for cut in summary.cuts],
             violations=truth.violations,
             unplugs=self.unplugs,
             reboots=self.reboots,

@@ -132,6 +132,8 @@ class PlasmaController:
             return Outcome(data={"mode": p6.mode})
         seq.set_params(params)
         seq.config = replace(seq.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
+        # RosettaCNC has no T112 M6: P6 itself says the plasma tool is active.
+        seq.plasma_mode = True
         # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
         seq.set_thc(False)
         seq.start(now, xy_mm)

@@ -13,7 +13,7 @@ from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.controller.sequence import State
 
-HERE = Path(__file__).parent
+PROGRAMS = Path(__file__).parents[2] / "dthc_bridge" / "programs"
 
 
 class Sender:
@@ -47,7 +47,7 @@ class Sender:
 
 
 def masso_sample() -> list[str]:
-    return (HERE / "masso_sample.ngc").read_text().splitlines()
+    return (PROGRAMS / "masso_sample.ngc").read_text().splitlines()
 
 
 def test_the_masso_sample_program_runs_from_start_to_end() -> None:

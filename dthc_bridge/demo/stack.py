@@ -1,0 +1,284 @@
+"""The whole system on one machine: broker, mock board, daemon and sender, as in a shop.
+
+Used by ``dthc-bridge demo``, the end-to-end tests and the soak benchmark. The broker is
+mosquitto when installed, otherwise an embedded amqtt broker; the mock board and the
+daemon run as their own processes on a pty; the sender runs here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import aiomqtt
+
+from ..sender import DaemonClient, Sender, SendReport, SimGantryBackend
+
+__all__ = ["Stack", "StackOptions", "StackResult"]
+
+STARTUP_S = 15.0
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+@dataclass(frozen=True)
+class StackOptions:
+    workdir: Path
+    scenario: str = "flat_clean"
+    seed: int = 1
+    broker: str = "auto"  # "mosquitto", "amqtt" or "auto"
+    board_id: str = "table1"
+    telemetry_hz: float = 50.0
+    mock_args: tuple[str, ...] = ()
+    daemon_env: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class StackResult:
+    report: SendReport
+    mock_exit: dict[str, Any]
+    daemon_exit_code: int | None
+    daemon_exit_s: float
+    telemetry: list[dict[str, Any]]
+    events: list[dict[str, Any]]
+    truth_path: Path
+
+
+class _Broker:
+    def __init__(self, kind: str, workdir: Path) -> None:
+        self.port = free_port()
+        self.workdir = workdir
+        mosquitto = shutil.which("mosquitto") or (
+            "/usr/sbin/mosquitto" if os.access("/usr/sbin/mosquitto", os.X_OK) else None
+        )
+        if kind == "auto":
+            kind = "mosquitto" if mosquitto else "amqtt"
+        self.kind = kind
+        self._mosquitto = mosquitto
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._amqtt: Any = None
+
+    @property
+    def protocol(self) -> str:
+        return "5" if self.kind == "mosquitto" else "3.1.1"  # amqtt speaks 3.1.1
+
+    async def start(self) -> None:
+        if self.kind == "mosquitto":
+            if self._mosquitto is None:
+                raise RuntimeError("mosquitto is not installed")
+            config = self.workdir / "mosquitto.conf"
+            config.write_text(
+                f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+            )
+            self._proc = subprocess.Popen(  # noqa: S603, ASYNC220 - our broker, started once
+                [self._mosquitto, "-c", str(config)],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            )  # fmt: skip
+        else:
+            from amqtt.broker import Broker  # noqa: PLC0415 - only without mosquitto
+
+            self._amqtt = Broker(
+                {
+                    "listeners": {"default": {"type": "tcp", "bind": f"127.0.0.1:{self.port}"}},
+                    "plugins": {
+                        "amqtt.plugins.authentication.AnonymousAuthPlugin": {
+                            "allow_anonymous": True
+                        }
+                    },
+                }
+            )
+            await self._amqtt.start()
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline:
+            with (
+                contextlib.suppress(OSError),
+                socket.create_connection(("127.0.0.1", self.port), 0.2),
+            ):
+                return
+            await asyncio.sleep(0.05)
+        raise RuntimeError(f"{self.kind} did not start on port {self.port}")
+
+    async def stop(self) -> None:
+        if self._proc is not None:
+            self._proc.terminate()
+            await asyncio.to_thread(self._proc.wait, 5)
+        if self._amqtt is not None:
+            await self._amqtt.shutdown()
+
+
+class Stack:
+    """``async with Stack(options) as stack: result = await stack.run(lines)``."""
+
+    def __init__(self, options: StackOptions) -> None:
+        self.options = options
+        self.workdir = options.workdir
+        self.base = f"demo{uuid.uuid4().hex[:6]}"
+        self.broker = _Broker(options.broker, self.workdir)
+        self.pty = self.workdir / "dthc0"
+        self.truth = self.workdir / "truth.jsonl"
+        self.mock: subprocess.Popen[str] | None = None
+        self.daemon: subprocess.Popen[bytes] | None = None
+        self.gantry_port = 0
+        self.telemetry: list[dict[str, Any]] = []
+        self.events: list[dict[str, Any]] = []
+        self._watch: asyncio.Task[None] | None = None
+        self._logs: list[IO[str]] = []
+
+    def _log(self, name: str) -> IO[str]:
+        handle = (self.workdir / name).open("w")
+        self._logs.append(handle)
+        return handle
+
+    async def __aenter__(self) -> Stack:
+        await self.broker.start()
+        self._start_mock()
+        self._start_daemon()
+        self._watch = asyncio.create_task(self._observe(), name="stack-observer")
+        await self._wait_online()
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
+                await self._watch
+        for proc in (self.daemon, self.mock):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                await asyncio.to_thread(proc.wait, 5)
+        if self.mock is not None and self.mock.stdout is not None:
+            self.mock.stdout.close()
+        for handle in self._logs:
+            handle.close()
+        await self.broker.stop()
+
+    def _start_mock(self) -> None:
+        self.mock = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
+            [sys.executable, "-m", "mock_device", "--pty", str(self.pty),
+             "--scenario", self.options.scenario, "--seed", str(self.options.seed),
+             "--truth", str(self.truth), "--gantry-listen", "socket://127.0.0.1:0",
+             *self.options.mock_args],
+            stdout=subprocess.PIPE, stderr=self._log("mock.log"), text=True,
+        )  # fmt: skip
+        assert self.mock.stdout is not None
+        ready = self.mock.stdout.readline().split()
+        if not ready or ready[0] != "READY":
+            raise RuntimeError("the mock board did not start: see mock.log")
+        self.gantry_port = int(next(w for w in ready if w.startswith("gantry=")).split("=")[1])
+
+    def _start_daemon(self) -> None:
+        config = self.workdir / "config.toml"
+        config.write_text(
+            f'[board]\nlink = "{self.pty}"\n\n'
+            f'[mqtt]\nhost = "127.0.0.1"\nport = {self.broker.port}\n'
+            f'protocol = "{self.broker.protocol}"\nbase_topic = "{self.base}"\n'
+            f'board_id = "{self.options.board_id}"\ntelemetry_hz = {self.options.telemetry_hz}\n'
+            f"state_poll_s = 0.05\nreconnect_initial_s = 0.1\nreconnect_max_s = 1.0\n\n"
+            f'[logging]\nlevel = "info"\njson_logs = true\n'
+        )
+        self.daemon = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
+            [sys.executable, "-m", "dthc_bridge", "run", "--config", str(config)],
+            stdout=self._log("daemon.log"), stderr=subprocess.STDOUT,
+            env={**os.environ, **self.options.daemon_env},
+        )  # fmt: skip
+
+    @property
+    def root(self) -> str:
+        return f"{self.base}/{self.options.board_id}"
+
+    async def _observe(self) -> None:
+        while True:
+            try:
+                async with aiomqtt.Client(
+                    "127.0.0.1", self.broker.port, identifier=f"observer-{self.base}",
+                    protocol=aiomqtt.ProtocolVersion.V311,
+                ) as client:  # fmt: skip
+                    for leaf in ("telemetry", "event", "board", "availability"):
+                        await client.subscribe(f"{self.root}/{leaf}", qos=1)
+                    async for message in client.messages:
+                        self._record(message)
+            except aiomqtt.MqttError:
+                await asyncio.sleep(0.2)
+
+    def _record(self, message: aiomqtt.Message) -> None:
+        try:
+            doc = json.loads(bytes(message.payload))
+        except ValueError:
+            return
+        if not isinstance(doc, dict):
+            return
+        leaf = message.topic.value.rsplit("/", 1)[-1]
+        if leaf == "telemetry":
+            self.telemetry.append(doc)
+        else:
+            self.events.append({"topic": leaf, **doc})
+
+    async def _wait_online(self) -> None:
+        deadline = time.monotonic() + STARTUP_S
+        while time.monotonic() < deadline:
+            boards = [e for e in self.events if e["topic"] == "board"]
+            if boards and boards[-1].get("state") == "online":
+                return
+            if self.daemon is not None and self.daemon.poll() is not None:
+                raise RuntimeError("the daemon exited: see daemon.log")
+            await asyncio.sleep(0.05)
+        raise RuntimeError("the daemon did not bring the board online in time: see daemon.log")
+
+    async def send(self, lines: list[str], *, start_line: int = 1) -> SendReport:
+        daemon = DaemonClient(
+            "127.0.0.1", self.broker.port, base_topic=self.base,
+            board_id=self.options.board_id, protocol=self.broker.protocol,
+        )  # fmt: skip
+        backend = SimGantryBackend("127.0.0.1", self.gantry_port)
+        async with daemon.connected():
+            try:
+                return await Sender(daemon, backend).run(lines, start_line=start_line)
+            finally:
+                await backend.close()
+
+    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+        daemon = DaemonClient(
+            "127.0.0.1", self.broker.port, base_topic=self.base,
+            board_id=self.options.board_id, protocol=self.broker.protocol,
+        )  # fmt: skip
+        async with daemon.connected():
+            return await daemon.request(name, **args)
+
+    async def finish(self, report: SendReport) -> StackResult:
+        """Stop the daemon (SIGTERM, timed) and the mock; collect what happened."""
+        assert self.daemon is not None
+        assert self.mock is not None
+        await asyncio.sleep(0.3)  # let the last telemetry and state arrive
+        t0 = time.monotonic()
+        self.daemon.send_signal(signal.SIGTERM)
+        try:
+            code: int | None = await asyncio.to_thread(self.daemon.wait, 10)
+        except subprocess.TimeoutExpired:
+            code = None
+        exit_s = time.monotonic() - t0
+        self.mock.send_signal(signal.SIGTERM)
+        await asyncio.to_thread(self.mock.wait, 10)
+        mock_exit: dict[str, Any] = {}
+        for line in (self.workdir / "mock.log").read_text().splitlines():
+            if '"event": "exit"' in line:
+                mock_exit = json.loads(line)
+        return StackResult(
+            report, mock_exit, code, exit_s, list(self.telemetry), list(self.events), self.truth
+        )

@@ -1,0 +1,104 @@
+"""The motion backend seam: where a sender's XY motion lines go.
+
+``sim`` drives the mock board's gantry over its control port. A real motion controller
+(a grblHAL board, LinuxCNC over its Python API, a MASSO) plugs in by implementing the
+same five verbs.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from typing import Any, Protocol
+
+__all__ = ["BackendError", "MotionBackend", "SimGantryBackend"]
+
+
+class BackendError(Exception):
+    """The motion backend refused a line or is unreachable."""
+
+
+class MotionBackend(Protocol):
+    async def queue(self, line: str) -> None:
+        """Queue one motion line (G0/G1/G2/G3 ...); returns once accepted."""
+        ...
+
+    async def wait_idle(self) -> tuple[float, float]:
+        """Wait until every queued move is done; returns the XY position."""
+        ...
+
+    async def hold(self) -> None:
+        """Feed hold: decelerate to a stop, keep the queue."""
+        ...
+
+    async def clear(self) -> None:
+        """Drop queued motion (after an error, before a resume)."""
+        ...
+
+    async def close(self) -> None: ...
+
+
+class SimGantryBackend:
+    """JSON lines to the mock's gantry port (``dthc-mock --gantry-listen``)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.host = host
+        self.port = port
+        self._reader: asyncio.StreamReader | None = None
+        self._writer: asyncio.StreamWriter | None = None
+        self._lock = asyncio.Lock()
+
+    async def connect(self) -> None:
+        try:
+            self._reader, self._writer = await asyncio.open_connection(self.host, self.port)
+        except OSError as exc:
+            raise BackendError(f"gantry {self.host}:{self.port}: {exc}") from None
+
+    async def _call(self, **request: Any) -> dict[str, Any]:
+        if self._writer is None or self._reader is None:
+            await self.connect()
+        assert self._writer is not None
+        assert self._reader is not None
+        async with self._lock:
+            self._writer.write(json.dumps(request).encode() + b"\n")
+            await self._writer.drain()
+            line = await self._reader.readline()
+        if not line:
+            raise BackendError("gantry closed the connection")
+        reply: dict[str, Any] = json.loads(line)
+        if not reply.get("ok"):
+            raise BackendError(str(reply.get("error", "refused")))
+        return reply
+
+    async def queue(self, line: str) -> None:
+        await self._call(op="line", gcode=line)
+
+    async def wait_idle(self) -> tuple[float, float]:
+        # Its own connection: the wait may be cancelled (a pause), and a hold must not queue
+        # behind it on the control connection.
+        try:
+            reader, writer = await asyncio.open_connection(self.host, self.port)
+        except OSError as exc:
+            raise BackendError(f"gantry {self.host}:{self.port}: {exc}") from None
+        try:
+            writer.write(b'{"op": "wait_idle"}\n')
+            await writer.drain()
+            line = await reader.readline()
+        finally:
+            writer.close()
+        if not line:
+            raise BackendError("gantry closed the connection")
+        reply = json.loads(line)
+        return float(reply["x"]), float(reply["y"])
+
+    async def hold(self) -> None:
+        await self._call(op="hold")
+
+    async def clear(self) -> None:
+        await self._call(op="clear")
+
+    async def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            await self._writer.wait_closed()
+            self._writer = None

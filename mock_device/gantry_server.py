@@ -1,0 +1,107 @@
+"""The gantry's control port: how a sender's ``sim`` motion backend drives the mock's XY.
+
+JSON lines over TCP, one request per line, one reply per request:
+
+    {"op": "line", "gcode": "G1 X10 Y5 F3000"}  -> {"ok": true, "queued": 3}
+    {"op": "wait_idle"}                          -> {"ok": true, "x": .., "y": ..} when idle
+    {"op": "hold"} / {"op": "resume"} / {"op": "clear"}
+    {"op": "status"}     -> {"ok": true, "x", "y", "speed_mm_s", "idle", "queued"}
+
+A bad line or op gets {"ok": false, "error": "..."} and changes nothing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from typing import Any
+
+from .plant.gantry import GcodeError
+from .plant.plant import Plant
+
+__all__ = ["GantryServer"]
+
+MAX_LINE = 4096
+
+
+class GantryServer:
+    def __init__(self, plant: Plant, host: str, port: int) -> None:
+        self.plant = plant
+        self.host = host
+        self.port = port
+        self._server: asyncio.Server | None = None
+        self._clients: set[asyncio.Task[None]] = set()
+
+    @property
+    def bound_port(self) -> int:
+        assert self._server is not None
+        port: int = self._server.sockets[0].getsockname()[1]
+        return port
+
+    async def start(self) -> None:
+        self._server = await asyncio.start_server(self._client, self.host, self.port)
+
+    async def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            for task in list(self._clients):
+                task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await asyncio.gather(*self._clients, return_exceptions=True)
+            await self._server.wait_closed()
+            self._server = None
+
+    def _status(self) -> dict[str, Any]:
+        g = self.plant.gantry
+        return {
+            "ok": True,
+            "x": round(g.x_mm, 4),
+            "y": round(g.y_mm, 4),
+            "speed_mm_s": round(g.speed_mm_s, 3),
+            "idle": g.idle,
+            "queued": g.queue_len,
+        }
+
+    async def _client(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        task = asyncio.current_task()
+        assert task is not None
+        self._clients.add(task)
+        try:
+            while line := await reader.readline():
+                reply = await self._handle(line[:MAX_LINE])
+                writer.write(json.dumps(reply).encode() + b"\n")
+                await writer.drain()
+        except (ConnectionError, asyncio.CancelledError):
+            pass
+        finally:
+            self._clients.discard(task)
+            writer.close()
+
+    async def _handle(self, raw: bytes) -> dict[str, Any]:
+        try:
+            request = json.loads(raw)
+            op = request["op"]
+        except (ValueError, KeyError, TypeError):
+            return {"ok": False, "error": "expected a JSON object with an 'op'"}
+        gantry = self.plant.gantry
+        if op == "line":
+            try:
+                queued = gantry.feed_line(str(request.get("gcode", "")))
+            except GcodeError as exc:
+                return {"ok": False, "error": str(exc)}
+            return {"ok": True, "queued": queued}
+        if op == "wait_idle":
+            # The gantry is stepped by the board's sample ticks; poll it at 200 Hz.
+            while not gantry.idle:  # noqa: ASYNC110 - no event to wait on in the plant
+                await asyncio.sleep(0.005)
+            return self._status()
+        if op == "hold":
+            gantry.hold()
+        elif op == "resume":
+            gantry.resume()
+        elif op == "clear":
+            gantry.clear()
+        elif op != "status":
+            return {"ok": False, "error": f"unknown op {op!r}"}
+        return self._status()

@@ -1,0 +1,69 @@
+"""End to end: mosquitto, the daemon process, the mock process on a pty and the sender."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from dthc_bridge.demo import Stack, StackOptions, program_lines
+from dthc_bridge.demo.summary import summarize
+
+pytestmark = pytest.mark.slow
+
+
+async def run(program: str, scenario: str, tmp_path: Path, **options: object) -> dict[str, object]:
+    stack_options = StackOptions(tmp_path, scenario=scenario, broker="mosquitto", **options)  # type: ignore[arg-type]
+    async with Stack(stack_options) as stack:
+        report = await stack.send(program_lines(program))
+        result = await stack.finish(report)
+    return summarize(result, stack_options.telemetry_hz)
+
+
+def assert_clean(summary: dict[str, object], cuts: int, rms_mm: float, max_mm: float) -> None:
+    assert summary["errors"] == [], summary["errors"]
+    assert summary["safety_violations"] == 0
+    assert summary["pierces"] == cuts
+    assert summary["completed_cuts"] == cuts
+    assert isinstance(summary["height_rms_mm"], float)
+    assert summary["height_rms_mm"] < rms_mm
+    assert isinstance(summary["height_max_err_mm"], float)
+    assert summary["height_max_err_mm"] < max_mm
+    assert summary["daemon_exit_code"] == 0
+    assert summary["torch_on_at_exit"] is False
+
+
+async def test_masso_sample_on_a_warped_sheet(tmp_path: Path) -> None:
+    """The seed's MASSO program: two cuts, held within 0.5 mm, no violation, clean exit."""
+    assert_clean(await run("masso_sample", "masso_warped", tmp_path), 2, 0.15, 0.5)
+
+
+async def test_rosetta_g100_program(tmp_path: Path) -> None:
+    """G100 P4/P5/P6/P7/P0: two probed-and-started cuts on a warped sheet."""
+    summary = await run("rosetta_g100", "warped_sheet", tmp_path)
+    assert_clean(summary, 2, 0.2, 0.6)
+    sender = summary["sender"]
+    assert isinstance(sender, dict)
+    assert sender["resume_points"] == [6, 16]
+
+
+async def test_holes_and_corners_with_velocity_reduction(tmp_path: Path) -> None:
+    """Sharp corners and two holes at 60 % feed (M67 E3): no dive, THC locked in the holes."""
+    summary = await run("holes_corners", "flat_clean", tmp_path)
+    assert_clean(summary, 3, 0.15, 0.5)
+    cuts = summary["cuts"]
+    assert isinstance(cuts, list)
+    assert all(cut["dives"] == 0 for cut in cuts)
+    assert cuts[1]["thc_locked_s"] > cuts[1]["thc_active_s"]  # a hole: mostly locked
+
+
+async def test_arc_lost_pauses_the_program_and_reports_the_resume_point(tmp_path: Path) -> None:
+    """An arc lost mid-cut stops the sender with the error and the P0 line to resume from."""
+    summary = await run("rosetta_g100", "arc_lost_midcut", tmp_path)
+    sender = summary["sender"]
+    assert isinstance(sender, dict)
+    assert not sender["ok"]
+    assert "arc lost" in sender["error"]
+    assert sender["resume_from"] == 6
+    assert summary["safety_violations"] == 0
+    assert summary["torch_on_at_exit"] is False
