@@ -132,6 +132,7 @@ class BoardFirmware:
         self.lease_ms = fp.DEFAULT_LEASE_MS
         self.lease_expired = False
         self.lease_violation_counted = False
+        self.unsafe_torch_us = 0  # torch on past lease + one period: the soak's figure
         self.last_rx_us = 0
         self.faults = 0
         self.fault_counter_of: dict[int, int] = {}
@@ -479,9 +480,11 @@ class BoardFirmware:
         late = self.session and self.t_us - self.last_rx_us > grace_us
         if not late:
             self.lease_violation_counted = False
-        elif self.torch_on and not self.lease_violation_counted:
-            self.lease_violation_counted = True  # once per episode
-            self.plant.count_violation("torch_on_after_lease_expiry")
+        elif self.torch_on:
+            self.unsafe_torch_us += self.sampling.period_us
+            if not self.lease_violation_counted:
+                self.lease_violation_counted = True  # once per episode
+                self.plant.count_violation("torch_on_after_lease_expiry")
 
     def _check_safety(self) -> None:
         inputs = self.inputs

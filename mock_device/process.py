@@ -171,6 +171,7 @@ class MockBoardProcess:
             "exit",
             cuts=[dataclasses.asdict(cut) for cut in summary.cuts],
             violations=truth.violations,
+            unsafe_torch_ms=self.board.unsafe_torch_us / 1000,
             unplugs=self.unplugs,
             reboots=self.reboots,
             rx_crc_errors=fw.decoder.stats.crc_errors,

@@ -33,6 +33,7 @@ class SimulatedBoard:
         self.faults = LinkFaultInjector(faults or FaultPlan(), random.Random(seed + 1))
         self._out = bytearray()
         self.firmware_class = firmware_class
+        self.unsafe_torch_us_before_reboots = 0
         self.identity = identity
         self.firmware = firmware_class(
             self.plant, self._board_write, rng=self.rng, identity=identity
@@ -61,11 +62,17 @@ class SimulatedBoard:
 
     def reboot(self) -> None:
         """Power-cycle the board: a new firmware instance, a new boot id; the plant stays."""
+        self.unsafe_torch_us_before_reboots += self.firmware.unsafe_torch_us
         self.plant.set_torch(False)
         self.firmware = self.firmware_class(
             self.plant, self._board_write, rng=self.rng, identity=self.identity,
             reset_reason=fp.ResetReason.WATCHDOG,
         )  # fmt: skip
+
+    @property
+    def unsafe_torch_us(self) -> int:
+        """Torch-on time past the lease, over every firmware instance since the start."""
+        return self.unsafe_torch_us_before_reboots + self.firmware.unsafe_torch_us
 
     @property
     def t_s(self) -> float:

@@ -225,6 +225,7 @@ class Stack:
         if not isinstance(doc, dict):
             return
         leaf = message.topic.value.rsplit("/", 1)[-1]
+        doc["received_s"] = time.monotonic()
         if leaf == "telemetry":
             self.telemetry.append(doc)
         else:

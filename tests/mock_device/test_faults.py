@@ -54,6 +54,7 @@ def test_lease_ignoring_firmware_is_counted_as_a_safety_violation() -> None:
     host.pump(300)
     assert board.plant.torch_on
     assert board.plant.truth.violations.get("torch_on_after_lease_expiry") == 1
+    assert board.unsafe_torch_us > 200_000  # 300 ms quiet, 50 ms lease: ~249 ms unsafe
 
 
 def test_good_firmware_has_no_lease_violation() -> None:
@@ -65,6 +66,7 @@ def test_good_firmware_has_no_lease_violation() -> None:
     host.pump(300)
     assert not board.plant.torch_on
     assert not board.plant.truth.violations.get("torch_on_after_lease_expiry")
+    assert board.unsafe_torch_us == 0
 
 
 def test_duplicates_acted_twice_variant_reexecutes_retransmissions() -> None:
