@@ -42,7 +42,7 @@ unit: $(STAMP)
 test: $(STAMP) broker systemd-tools lint typecheck unit
 
 bench: $(STAMP)
-	$(BIN)/python -m firmware_protocol.bench --json
+	for suite in codec control latency soak scale; do $(BIN)/dthc-bridge bench $$suite --json; done
 
 demo: $(STAMP)
 	$(BIN)/dthc-bridge demo

@@ -59,9 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_uninstall_arguments(
         sub.add_parser("uninstall-service", help="remove the service (--purge: config and user)")
     )
-    bench = sub.add_parser("bench", help="run a benchmark suite and print JSON figures")
-    bench.add_argument("suite", choices=["codec"])
-    bench.add_argument("--json", action="store_true")
+    bench = sub.add_parser(
+        "bench", help="benchmark suites: codec, latency, control, soak, scale (--json)"
+    )
+    bench.add_argument("args", nargs=argparse.REMAINDER, help="SUITE [--json] [options]")
     return parser
 
 
@@ -143,9 +144,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "send":
         return asyncio.run(_send(args))
     if args.command == "bench":
-        from firmware_protocol import bench  # noqa: PLC0415 - only the bench command needs it
+        from .bench.cli import main as bench_main  # noqa: PLC0415 - only the bench needs it
 
-        return bench.main(["--json"] if args.json else [])
+        return bench_main(args.args)
     return 2
 
 

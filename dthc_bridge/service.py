@@ -303,6 +303,12 @@ class ControllerService:
                 )
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
+            status = session.initial_status if session is not None else None
+            if status is not None and status.faults:
+                # A fault latched while we were away (the lease ran out during an unplug):
+                # the operator re-arms before the next cut, which also resets the board.
+                self.seq.on_board_fault(_fault_names(status.faults))
+                self._pump()
         elif state in (LinkState.OFFLINE, LinkState.INCOMPATIBLE):
             self.seq.on_link_down(reason)
             # The torch-off request cannot reach an absent board; the board's lease does it.
@@ -329,6 +335,10 @@ class ControllerService:
         with contextlib.suppress(LinkError, asyncio.TimeoutError):
             self._send_velocity(0.0)
             await asyncio.wait_for(self.client.torch(False), 0.5)
+
+
+def _fault_names(faults: int) -> str:
+    return ", ".join(_fault_name(code) for code in range(16) if faults & (1 << code))
 
 
 def _fault_name(code: int) -> str:

@@ -131,6 +131,7 @@ class Stack:
         self.workdir = options.workdir
         self.base = f"demo{uuid.uuid4().hex[:6]}"
         self.broker = _Broker(options.broker, self.workdir)
+        self.broker_shared = False  # True: another Stack owns (starts and stops) the broker
         self.pty = self.workdir / "dthc0"
         self.truth = self.workdir / "truth.jsonl"
         self.mock: subprocess.Popen[str] | None = None
@@ -147,7 +148,8 @@ class Stack:
         return handle
 
     async def __aenter__(self) -> Stack:
-        await self.broker.start()
+        if not self.broker_shared:
+            await self.broker.start()
         self._start_mock()
         self._start_daemon()
         self._watch = asyncio.create_task(self._observe(), name="stack-observer")
@@ -167,7 +169,8 @@ class Stack:
             self.mock.stdout.close()
         for handle in self._logs:
             handle.close()
-        await self.broker.stop()
+        if not self.broker_shared:
+            await self.broker.stop()
 
     def _start_mock(self) -> None:
         self.mock = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
@@ -242,11 +245,17 @@ class Stack:
             await asyncio.sleep(0.05)
         raise RuntimeError("the daemon did not bring the board online in time: see daemon.log")
 
-    async def send(self, lines: list[str], *, start_line: int = 1) -> SendReport:
-        daemon = DaemonClient(
+    def daemon_client(self, cls: type[DaemonClient] = DaemonClient) -> DaemonClient:
+        return cls(
             "127.0.0.1", self.broker.port, base_topic=self.base,
             board_id=self.options.board_id, protocol=self.broker.protocol,
         )  # fmt: skip
+
+    async def send(
+        self, lines: list[str], *, start_line: int = 1, daemon: DaemonClient | None = None
+    ) -> SendReport:
+        """Run the sender over ``lines``; ``daemon`` must not be connected yet."""
+        daemon = daemon or self.daemon_client()
         backend = SimGantryBackend("127.0.0.1", self.gantry_port)
         async with daemon.connected():
             try:
@@ -254,15 +263,21 @@ class Stack:
             finally:
                 await backend.close()
 
+    async def reset_motion(self) -> None:
+        """What an operator does before restarting after an error: clear and release."""
+        backend = SimGantryBackend("127.0.0.1", self.gantry_port)
+        try:
+            await backend.clear()
+            await backend.resume()
+        finally:
+            await backend.close()
+
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
-        daemon = DaemonClient(
-            "127.0.0.1", self.broker.port, base_topic=self.base,
-            board_id=self.options.board_id, protocol=self.broker.protocol,
-        )  # fmt: skip
+        daemon = self.daemon_client()
         async with daemon.connected():
             return await daemon.request(name, **args)
 
-    async def finish(self, report: SendReport) -> StackResult:
+    async def finish(self, report: SendReport | None = None) -> StackResult:
         """Stop the daemon (SIGTERM, timed) and the mock; collect what happened."""
         assert self.daemon is not None
         assert self.mock is not None
@@ -281,5 +296,11 @@ class Stack:
             if '"event": "exit"' in line:
                 mock_exit = json.loads(line)
         return StackResult(
-            report, mock_exit, code, exit_s, list(self.telemetry), list(self.events), self.truth
+            report or SendReport(),
+            mock_exit,
+            code,
+            exit_s,
+            list(self.telemetry),
+            list(self.events),
+            self.truth,
         )

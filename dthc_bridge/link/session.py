@@ -73,6 +73,7 @@ class BoardSession:
         self.decoder = fp.StreamDecoder(on_error=self._on_decode_error)
         self.clock = BoardClock()
         self.info: fp.HelloInfo | None = None
+        self.initial_status: fp.Status | None = None
         self.boot_id: int | None = None
         self._transport: Transport | None = None
         self._loop = asyncio.get_running_loop()
@@ -221,6 +222,12 @@ class BoardSession:
         await self.request(fp.SetLease(0, self.timing.lease_ms))
         for _ in range(4):
             await self.sync_clock()
+        status = await self.request(fp.Query(0, fp.QueryWhat.STATUS))
+        assert isinstance(status, fp.Status)
+        # Reports of events before this session are history: start counting from here. A
+        # fault latched before it is in ``initial_status.faults`` instead.
+        self.initial_status = status
+        self._last_event_counter = status.event_counter
         log.info(
             "board_hello",
             url=self.url,
@@ -315,19 +322,21 @@ class BoardSession:
             if not pending.future.done():
                 pending.future.set_result(msg)
             return
-        if isinstance(msg, fp.Event | fp.Fault):
-            self._count_event(msg.counter)
+        if isinstance(msg, fp.Event | fp.Fault) and not self._count_event(msg.counter):
+            return  # a FAULT re-report (same counter) or an older report: already handled
         if self.on_report is not None:
             self.on_report(msg)
 
-    def _count_event(self, counter: int) -> None:
+    def _count_event(self, counter: int) -> bool:
+        """Track the shared event counter; False for a report seen before."""
         last = self._last_event_counter
         if last is not None:
             ahead = (counter - last) & 0xFFFFFFFF
             if ahead == 0 or ahead >= 0x80000000:
-                return  # a FAULT re-report, or older
+                return False
             if ahead > 1:
                 self.stats.event_gaps += ahead - 1
                 if self.on_event_gap is not None:
                     self.on_event_gap(ahead - 1)
         self._last_event_counter = counter
+        return True

@@ -35,6 +35,10 @@ class MotionBackend(Protocol):
         """Drop queued motion (after an error, before a resume)."""
         ...
 
+    async def resume(self) -> None:
+        """Release a feed hold."""
+        ...
+
     async def close(self) -> None: ...
 
 
@@ -96,6 +100,9 @@ class SimGantryBackend:
 
     async def clear(self) -> None:
         await self._call(op="clear")
+
+    async def resume(self) -> None:
+        await self._call(op="resume")
 
     async def close(self) -> None:
         if self._writer is not None:

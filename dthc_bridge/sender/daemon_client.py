@@ -43,12 +43,16 @@ class DaemonClient:
         self._waiting: dict[str, asyncio.Future[dict[str, Any]]] = {}
         self._event_handlers: list[Callable[[dict[str, Any]], None]] = []
         self._task: asyncio.Task[None] | None = None
+        # A request published while the daemon is not subscribed would be dropped by the
+        # broker: wait for its availability (retained, republished on every reconnect).
+        self._online = asyncio.Event()
 
     @contextlib.asynccontextmanager
     async def connected(self) -> AsyncIterator[DaemonClient]:
         async with self._client:
             await self._client.subscribe(f"{self.root}/response/#", qos=1)
             await self._client.subscribe(f"{self.root}/event", qos=1)
+            await self._client.subscribe(f"{self.root}/availability", qos=1)
             self._task = asyncio.create_task(self._pump(), name="sender-mqtt")
             try:
                 yield self
@@ -68,6 +72,12 @@ class DaemonClient:
                 continue
             if not isinstance(document, dict):
                 continue
+            if message.topic.matches(f"{self.root}/availability"):
+                if document.get("state") == "online":
+                    self._online.set()
+                else:
+                    self._online.clear()
+                continue
             if message.topic.matches(f"{self.root}/event"):
                 for handler in self._event_handlers:
                     handler(document)
@@ -78,6 +88,10 @@ class DaemonClient:
 
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
         """Publish a request, wait for its response; DaemonError on an error response."""
+        try:
+            await asyncio.wait_for(self._online.wait(), self.timeout_s)
+        except TimeoutError:
+            raise DaemonError(f"{name}: the daemon is not online") from None
         transaction = f"s{next(self._ids)}"
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._waiting[transaction] = future

@@ -1,0 +1,668 @@
+"""``bench latency``: the daemon's hot path, in this process and end to end over a pty.
+
+Both parts build the daemon's real receive path: transport callback -> BoardSession
+(StreamDecoder) -> BoardClient listener -> ControllerService._on_board ->
+CutSequence.on_samples -> ThcController -> ZVelocity -> BoardSession.send_velocity ->
+transport write. A cut is started the way a sender does it (``T112 M6``, ``G200 ...``,
+``M667 F3000``, the cut's ``G1 ... F5500`` for the requested feed, ``M3`` through
+``ControllerService.execute_gcode``); measuring starts once the THC has its target and no
+lock (XY at 100 % of the requested feed).
+
+**End to end over a pty** (runs first): the mock board as its own process
+(``python -m mock_device --pty``) running a long rectangle at the requested feed, the
+board configured to 1 kHz, batch 1 (``--e2e-batch``). For each SAMPLES batch the host
+records when its bytes arrived and when the answering Z_VELOCITY write returned
+(``host``). A Heartbeat request every 20 ms measures the round trip through the same pty
+and the same mock event loop, timed at the transport (``rtt``: the request's write
+returned -> the read that holds its ACK). The estimate ``e2e = host + rtt`` (percentile by
+percentile, a conservative composition) covers board send -> host -> board receipt: the
+RTT's two legs are the batch's way in and the Z command's way out. The protocol gives a
+second, coarser view without help from the mock: SAMPLES carry ``zvel_seq``, the last
+Z_VELOCITY the board applied, so the first batch that shows an answer bounds when the
+board had it (``board_bound``, in board time). Its resolution is one mock wake, not one
+sample: the mock ticks its firmware in bursts (at batch 1 it wakes every 2 ms and sends
+two batches), so this bound reads 1-2 ms even when the answer arrived within 0.2 ms.
+CPU share (``getrusage`` deltas) and RSS (``/proc/self/status``) are this process's: the
+daemon part (link, session, controller; no MQTT); the mock runs in its own process.
+
+**In-process processing** (runs second): a SimulatedBoard in this process brings the
+session up and the cut to THC-active in real time; then the board stops and pre-encoded
+SAMPLES frames (the cut's voltage: target + 2 V slow drift + 0.4 V noise, XY at the
+requested feed) are fed to the transport callback at their real pace (1 kHz sample rate),
+batch 1 and batch 5, ``--duration`` seconds each. Per batch: bytes in -> Z_VELOCITY bytes
+handed to the (recording) transport, ``perf_counter_ns``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import math
+import os
+import random
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import firmware_protocol as fp
+from dthc_bridge.board import BoardClient, Telemetry
+from dthc_bridge.controller.plasma import PlasmaController
+from dthc_bridge.controller.sequence import CutSequence, State
+from dthc_bridge.controller.thc import ThcController
+from dthc_bridge.link import LinkError, LinkSupervisor, LinkTiming, extend_u32
+from dthc_bridge.service import ControllerService
+from dthc_bridge.transport import Transport, TransportError, open_transport
+from dthc_bridge.transport.base import BytesCallback, LostCallback
+from mock_device.plant import load_scenario
+from mock_device.sim import SimulatedBoard
+
+from .report import Goal, goals_block, percentiles
+
+__all__ = ["TimedClient", "add_arguments", "run", "run_async"]
+
+SCENARIO = "flat_clean"
+FEED_MM_MIN = 5500.0
+PROCESSING_P99_GOAL_US = 200.0
+E2E_P99_GOAL_US = 1000.0
+CPU_GOAL_PERCENT = 15.0
+RTT_PROBE_PERIOD_S = 0.02
+
+
+class TimedClient(BoardClient):
+    """BoardClient that notes which batch each Z_VELOCITY answers, and when it left.
+
+    Listener order: ``_mark`` (registered here, before the service's), the service's
+    ``_on_board``, then ``_unmark`` (``finish_wiring``, after the service is built). A
+    Z_VELOCITY sent while a batch is being handled answers that batch.
+    """
+
+    def __init__(self, supervisor: LinkSupervisor) -> None:
+        super().__init__(supervisor)
+        self.chunk_ns = 0  # set by the byte source just before the session decodes
+        self.recording = False
+        self._batch: fp.Samples | None = None
+        self._t_last_us = 0
+        # (stream_seq, t_last_us 64-bit, zvel_seq, samples) per batch while recording
+        self.batches: list[tuple[int, int, int, int]] = []
+        # (chunk_ns, out_ns, velocity_seq, batch index) per answer while recording
+        self.answers: list[tuple[int, int, int, int]] = []
+        self.last_batch: fp.Samples | None = None
+        self.add_listener(self._mark)
+
+    def finish_wiring(self) -> None:
+        self.add_listener(self._unmark)
+
+    def _mark(self, item: Telemetry) -> None:
+        if type(item) is fp.Samples:
+            self._batch = item
+            self.last_batch = item
+            if self.recording:
+                t_last = item.t0_us + item.period_us * (len(item.samples_cv) - 1)
+                self._t_last_us = extend_u32(t_last & 0xFFFFFFFF, self._t_last_us)
+                self.batches.append(
+                    (item.stream_seq, self._t_last_us, item.zvel_seq, len(item.samples_cv))
+                )
+
+    def _unmark(self, item: Telemetry) -> None:
+        self._batch = None
+
+    def z_velocity(self, velocity_mm_s: float, expiry_ms: int | None = None) -> None:
+        super().z_velocity(velocity_mm_s, expiry_ms)
+        if self.recording and self._batch is not None:
+            out = time.perf_counter_ns()
+            session = self.link.session
+            seq = session.velocity_seq if session is not None else -1
+            self.answers.append((self.chunk_ns, out, seq, len(self.batches) - 1))
+
+
+@dataclass
+class Rig:
+    supervisor: LinkSupervisor
+    client: TimedClient
+    service: ControllerService
+    configured: asyncio.Event
+    tasks: list[asyncio.Task[None]] = field(default_factory=list)
+
+    @property
+    def seq(self) -> CutSequence:
+        return self.service.seq
+
+    def thc_active(self) -> bool:
+        seq = self.seq
+        return (
+            seq.state is State.CUTTING
+            and seq.thc.target_v is not None
+            and not seq.thc.locks(self.service.now)
+        )
+
+    async def close(self) -> None:
+        for task in self.tasks:
+            task.cancel()
+        for task in self.tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        session = self.supervisor.session
+        if session is not None:
+            await session.close()
+
+
+def build_rig(
+    url: str,
+    opener_factory: Callable[[TimedClient], Callable[..., Awaitable[Transport]]],
+    batch_size: int,
+) -> Rig:
+    """The daemon's link and controller, wired as ``daemon.build_service`` does."""
+    holder: list[TimedClient] = []
+
+    async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
+        return await opener_factory(holder[0])(on_bytes, on_lost)
+
+    supervisor = LinkSupervisor(url, LinkTiming(), opener=opener)
+    client = TimedClient(supervisor)
+    holder.append(client)
+    configured = asyncio.Event()
+
+    async def setup(board: BoardClient) -> None:
+        await board.configure(sample_rate_hz=1000, batch_size=batch_size)
+        configured.set()
+
+    service = ControllerService(
+        PlasmaController(CutSequence(thc=ThcController())), supervisor, client, board_setup=setup
+    )
+    client.finish_wiring()
+    rig = Rig(supervisor, client, service, configured)
+    rig.tasks.append(asyncio.create_task(supervisor.run(), name="link"))
+    rig.tasks.append(asyncio.create_task(service.run(), name="controller"))
+    return rig
+
+
+async def start_cut(rig: Rig, scenario: str, timeout_s: float = 30.0) -> None:
+    """Online, configured, a cut started by G-code, THC with target and no lock."""
+    await rig.supervisor.wait_online(timeout_s)
+    await asyncio.wait_for(rig.configured.wait(), timeout_s)
+    m = load_scenario(scenario).material
+    lines = (
+        "T112 M6",
+        f"G200 F300 P{m.pierce_height_mm:g} D300 C{m.cut_height_mm:g} V{m.cut_voltage_v:g} A90 O1",
+        "M667 F3000",
+        f"G1 X1150 F{FEED_MM_MIN:g}",  # the cut's motion: the requested feed
+        "M3",
+    )
+    for line in lines:
+        result = await rig.service.execute_gcode(line)
+        if not result.ok:
+            raise RuntimeError(f"{line}: {result.error}")
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout_s
+    while not rig.thc_active():
+        if loop.time() > end:
+            raise RuntimeError(f"THC not active within {timeout_s} s: {rig.seq.snapshot()}")
+        await asyncio.sleep(0.01)
+
+
+# --- end to end over a pty -----------------------------------------------------------------
+
+
+def rectangle_program(duration_s: float) -> list[str]:
+    """Laps of a 1050 mm square at the cut feed: XY keeps moving for ``duration_s``."""
+    lap_s = 4 * 1050 / (FEED_MM_MIN / 60.0)
+    laps = math.ceil((duration_s + 60.0) / lap_s)
+    lines = ["G21 G90", "G0 X100 Y100"]
+    for _ in range(laps):
+        lines += [
+            f"G1 X1150 Y100 F{FEED_MM_MIN:g}",
+            "G1 X1150 Y1150",
+            "G1 X100 Y1150",
+            "G1 X100 Y100",
+        ]
+    return lines
+
+
+def _proc_cpu_s(pid: int) -> float | None:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text(encoding="ascii").rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _status_kb(key: str) -> int | None:
+    try:
+        for line in Path("/proc/self/status").read_text(encoding="ascii").splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def board_bound(
+    batches: Sequence[tuple[int, int, int, int]], answers: Sequence[tuple[int, int, int, int]]
+) -> tuple[list[float], Counter[str]]:
+    """Per answer: board time from the answered batch's last sample to the first batch that
+    shows the answer applied (an upper bound); and after how many batches that was."""
+    bounds: list[float] = []
+    after: Counter[str] = Counter()
+    for _, _, vseq, index in answers:
+        if index < 0:
+            continue
+        t_answered = batches[index][1]
+        k = index + 1
+        while k < len(batches) and (batches[k][2] - vseq) & 0xFFFF >= 0x8000:
+            k += 1
+        if k >= len(batches):
+            break  # the run ended first
+        bounds.append(batches[k][1] - t_answered)
+        gap = k - index
+        after[str(gap) if gap < 4 else "4+"] += 1
+    return bounds, after
+
+
+async def measure_pty(duration_s: float, batch_size: int, scenario: str) -> dict[str, object]:
+    with tempfile.TemporaryDirectory(prefix="dthc-bench-") as tmp:
+        pty = Path(tmp) / "board"
+        program = Path(tmp) / "program.ngc"
+        program.write_text("\n".join(rectangle_program(duration_s)) + "\n", encoding="ascii")
+        proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "mock_device", "--pty", str(pty), "--scenario", scenario,
+            "--seed", "1", "--program", str(program),
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        try:
+            assert proc.stdout is not None
+            ready = await asyncio.wait_for(proc.stdout.readline(), 20.0)
+            if not ready.startswith(b"READY"):
+                raise RuntimeError(f"mock did not start: {ready!r}")
+            return await _measure_pty_link(str(pty), proc.pid, duration_s, batch_size, scenario)
+        finally:
+            if proc.returncode is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    await asyncio.wait_for(proc.wait(), 5.0)
+                except TimeoutError:
+                    proc.kill()
+                    await proc.wait()
+
+
+class RttProbe:
+    """Round trips of Heartbeat requests, timed at the transport: write returned -> the
+    read that holds the ACK frame (whose bytes are known once the request's seq is)."""
+
+    def __init__(self) -> None:
+        self.armed = False
+        self.sent_ns = 0
+        self.expect: bytes | None = None
+        self.rtts_us: list[float] = []
+        self.lost = 0
+
+    def on_write(self, data: bytes, boot_id: int | None) -> None:
+        if not self.armed:
+            return
+        self.sent_ns = time.perf_counter_ns()
+        self.armed = False
+        msgs = fp.StreamDecoder().feed(data)
+        if msgs and boot_id is not None:
+            self.expect = fp.encode(fp.Ack(msgs[0].seq, boot_id))
+
+    def on_read(self, data: bytes, t_ns: int) -> None:
+        if self.expect is not None and self.expect in data:
+            self.rtts_us.append((t_ns - self.sent_ns) / 1000)
+            self.expect = None
+
+
+class TimedTransport(Transport):
+    """Passes everything through; lets the RTT probe see its request leave."""
+
+    def __init__(self, inner: Transport, probe: RttProbe, boot_id: Callable[[], int | None]):
+        self.inner = inner
+        self.url = inner.url
+        self.probe = probe
+        self.boot_id = boot_id
+
+    @property
+    def is_open(self) -> bool:
+        return self.inner.is_open
+
+    def write(self, data: bytes) -> None:
+        self.inner.write(data)
+        if self.probe.armed:
+            self.probe.on_write(data, self.boot_id())
+
+    def discard_output(self) -> None:
+        self.inner.discard_output()
+
+    async def close(self) -> None:
+        await self.inner.close()
+
+
+async def _measure_pty_link(
+    url: str, mock_pid: int, duration_s: float, batch_size: int, scenario: str
+) -> dict[str, object]:
+    reads = [0]
+    probe = RttProbe()
+
+    def opener_factory(client: TimedClient) -> Callable[..., Awaitable[Transport]]:
+        async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
+            def timed(data: bytes) -> None:
+                t_ns = time.perf_counter_ns()
+                client.chunk_ns = t_ns
+                reads[0] += 1
+                on_bytes(data)
+                if probe.expect is not None:
+                    probe.on_read(data, t_ns)
+
+            def boot_id() -> int | None:
+                session = client.link.session
+                return None if session is None else session.boot_id
+
+            inner = await open_transport(url, timed, on_lost)
+            return TimedTransport(inner, probe, boot_id)
+
+        return opener
+
+    rig = build_rig(url, opener_factory, batch_size)
+    try:
+        await start_cut(rig, scenario)
+        client = rig.client
+        active = [0, 0]
+
+        async def probe_rtt() -> None:
+            while True:
+                await asyncio.sleep(RTT_PROBE_PERIOD_S)
+                active[0] += rig.thc_active()
+                active[1] += 1
+                if probe.expect is not None:
+                    probe.lost += 1  # the ACK was split over two reads, or lost
+                    probe.expect = None
+                with contextlib.suppress(LinkError):
+                    session = rig.supervisor.current()
+                    probe.armed = True  # the request's write is the next one, in this step
+                    await session.request(fp.Heartbeat(0))
+                probe.armed = False
+
+        stats = rig.supervisor.stats
+        gaps0, reads0 = stats.telemetry_gaps, reads[0]
+        mock_cpu0 = _proc_cpu_s(mock_pid)
+        usage0 = resource.getrusage(resource.RUSAGE_SELF)
+        wall0 = time.perf_counter()
+        client.recording = True
+        prober = asyncio.create_task(probe_rtt(), name="rtt-probe")
+        await asyncio.sleep(duration_s)
+        client.recording = False
+        prober.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await prober
+        wall = time.perf_counter() - wall0
+        usage1 = resource.getrusage(resource.RUSAGE_SELF)
+        mock_cpu1 = _proc_cpu_s(mock_pid)
+        rss_kb, hwm_kb = _status_kb("VmRSS"), _status_kb("VmHWM")
+        state = str(rig.seq.state)
+        with contextlib.suppress(Exception):
+            await asyncio.wait_for(rig.service.execute_gcode("M5"), 10.0)
+    finally:
+        await rig.close()
+    cpu_s = (usage1.ru_utime - usage0.ru_utime) + (usage1.ru_stime - usage0.ru_stime)
+    batches, answers = client.batches, client.answers
+    host = [(out - chunk) / 1000 for chunk, out, _, _ in answers]
+    bounds, after = board_bound(batches, answers)
+    host_p = percentiles(host)
+    rtt_p = percentiles(probe.rtts_us)
+    e2e: dict[str, object] = {"n": len(host)}
+    for key in ("p50", "p99", "max"):
+        h, r = host_p[key], rtt_p[key]
+        e2e[key] = round(h + r, 1) if isinstance(h, float) and isinstance(r, float) else None
+    answered = len({index for *_, index in answers})
+    samples = sum(b[3] for b in batches)
+    return {
+        "duration_s": round(wall, 2),
+        "sample_rate_hz": 1000,
+        "batch": batch_size,
+        "batches": len(batches),
+        "samples": samples,
+        "answered_batches": answered,
+        "telemetry_gaps": stats.telemetry_gaps - gaps0,
+        "batches_per_read": round(len(batches) / max(1, reads[0] - reads0), 2),
+        "thc_active_fraction": round(active[0] / active[1], 3) if active[1] else None,
+        "state_at_end": state,
+        "e2e_estimate_us": e2e,
+        "host_us": host_p,
+        "rtt_us": {**rtt_p, "unmatched": probe.lost},
+        "board_bound_us": {
+            **percentiles(bounds, digits=0),
+            "answer_seen_after_batches": dict(sorted(after.items())),
+            "resolution": "one mock wake (its firmware ticks in bursts); an upper bound",
+        },
+        "cpu_percent": round(100.0 * cpu_s / wall, 2),
+        "mock_cpu_percent": (
+            None
+            if mock_cpu0 is None or mock_cpu1 is None
+            else round(100.0 * (mock_cpu1 - mock_cpu0) / wall, 2)
+        ),
+        "rss_mb": None if rss_kb is None else round(rss_kb / 1024, 1),
+        "peak_rss_mb": None if hwm_kb is None else round(hwm_kb / 1024, 1),
+    }
+
+
+# --- in-process processing -----------------------------------------------------------------
+
+
+class SimLink(Transport):
+    """A SimulatedBoard in this process, ticked in real time until ``stop_board``.
+
+    Deliveries go through the event loop, never from inside ``write``. After
+    ``stop_board`` the firmware no longer ticks (it still answers requests) and the bench
+    feeds SAMPLES frames itself through ``feed``.
+    """
+
+    url = "sim://bench"
+
+    def __init__(self, board: SimulatedBoard, on_bytes: BytesCallback, on_lost: LostCallback):
+        self.board = board
+        self._on_bytes = on_bytes
+        self._on_lost = on_lost
+        self._loop = asyncio.get_running_loop()
+        self._open = True
+        self._ticking = True
+        self.ticker = self._loop.create_task(self._run(), name="sim-board")
+
+    @property
+    def is_open(self) -> bool:
+        return self._open
+
+    def write(self, data: bytes) -> None:
+        if not self._open:
+            raise TransportError(self.url, "closed")
+        self._loop.call_soon(self._to_board, bytes(data))
+
+    def _to_board(self, data: bytes) -> None:
+        self.board.host_write(data)
+        self._deliver()
+
+    def _deliver(self) -> None:
+        out = self.board.read()
+        if out and self._open:
+            self._on_bytes(out)
+
+    def feed(self, frame: bytes) -> None:
+        self._on_bytes(frame)
+
+    async def close(self) -> None:
+        if self._open:
+            self._open = False
+            self._ticking = False
+            self._on_lost(None)
+
+    def stop_board(self) -> None:
+        self._ticking = False
+
+    async def _run(self) -> None:
+        firmware = self.board.firmware
+        t0, fw_t0 = self._loop.time(), firmware.t_us
+        while self._ticking:
+            due_us = fw_t0 + round((self._loop.time() - t0) * 1e6)
+            while firmware.t_us < due_us:
+                firmware.tick()
+            self._deliver()
+            await asyncio.sleep(0.001)
+
+
+def make_frames(
+    last: fp.Samples, target_v: float, count: int, batch: int, seed: int = 1
+) -> tuple[list[bytes], fp.Samples]:
+    """``count`` SAMPLES frames continuing ``last``: the cut's voltage at the requested feed."""
+    rng = random.Random(seed)
+    period_us = 1000
+    frames = []
+    msg = last
+    stream = last.stream_seq
+    t_us = last.t0_us + last.period_us * len(last.samples_cv)
+    xy = round(FEED_MM_MIN / 60.0 * 10.0)
+    for _ in range(count):
+        stream = (stream + 1) & 0xFFFF
+        cv = []
+        for k in range(batch):
+            t = (t_us + k * period_us) / 1e6
+            v = target_v + 2.0 * math.sin(2 * math.pi * 0.5 * t) + rng.gauss(0.0, 0.4)
+            cv.append(round(v * 100))
+        msg = fp.Samples(
+            0, stream, t_us & 0xFFFFFFFF, period_us, last.z_um, last.inputs, last.zvel_seq, xy,
+            last.status, tuple(cv),
+        )  # fmt: skip
+        frames.append(fp.encode(msg))
+        t_us += period_us * batch
+    return frames, msg
+
+
+async def feed_paced(
+    rig: Rig, link: SimLink, frames: Sequence[bytes], batch: int
+) -> dict[str, object]:
+    client = rig.client
+    client.batches.clear()
+    client.answers.clear()
+    loop = asyncio.get_running_loop()
+    spacing = batch / 1000.0
+    calls: list[float] = []
+    active = 0
+    client.recording = True
+    start = loop.time()
+    i = 0
+    n = len(frames)
+    while i < n:
+        delay = start + i * spacing - loop.time()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        now = loop.time()
+        while i < n and start + i * spacing <= now:
+            t_in = time.perf_counter_ns()
+            client.chunk_ns = t_in
+            link.feed(frames[i])
+            calls.append((time.perf_counter_ns() - t_in) / 1000)
+            active += rig.thc_active()
+            i += 1
+    client.recording = False
+    wall = loop.time() - start
+    latencies = [(out - chunk) / 1000 for chunk, out, _, _ in client.answers]
+    return {
+        "batch": batch,
+        "batches": n,
+        "data_s": round(n * spacing, 2),
+        "wall_s": round(wall, 2),
+        "answers": len(client.answers),
+        "thc_active_fraction": round(active / n, 4) if n else None,
+        "processing_us": percentiles(latencies),
+        "call_us": percentiles(calls),
+    }
+
+
+async def measure_in_process(
+    duration_s: float, batches: Sequence[int], scenario: str
+) -> dict[str, object]:
+    board = SimulatedBoard(scenario, seed=1)
+    board.plant.gantry.feed_line("G21 G90")
+    board.plant.gantry.feed_line("G0 X100 Y100")
+    board.plant.gantry.feed_line(f"G1 X1150 Y100 F{FEED_MM_MIN:g}")
+    links: list[SimLink] = []
+
+    def opener_factory(client: TimedClient) -> Callable[..., Awaitable[Transport]]:
+        async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
+            link = SimLink(board, on_bytes, on_lost)
+            links.append(link)
+            return link
+
+        return opener
+
+    rig = build_rig(SimLink.url, opener_factory, 1)
+    results = []
+    try:
+        await start_cut(rig, scenario)
+        link = links[-1]
+        link.stop_board()
+        await link.ticker
+        last = rig.client.last_batch
+        target = rig.seq.thc.target_v
+        assert last is not None
+        assert target is not None
+        for batch in batches:
+            count = max(1, round(duration_s * 1000 / batch))
+            frames, last = make_frames(last, target, count, batch)
+            results.append(await feed_paced(rig, link, frames, batch))
+    finally:
+        await rig.close()
+    return {"scenario": scenario, "sample_rate_hz": 1000, "runs": results}
+
+
+# --- the suite -----------------------------------------------------------------------------
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--duration", type=float, default=30.0,
+        help="seconds of 1 kHz data per measurement (pty run; each in-process batch size)",
+    )  # fmt: skip
+    parser.add_argument("--e2e-batch", type=int, default=1, help="board batch size over the pty")
+    parser.add_argument(
+        "--batches", default="1,5", help="batch sizes for the in-process measurement"
+    )
+    parser.add_argument("--scenario", default=SCENARIO, help="mock plant scenario")
+    parser.add_argument(
+        "--skip", choices=("pty", "in-process"), action="append", default=[],
+        help="leave out one part",
+    )  # fmt: skip
+
+
+async def run_async(args: argparse.Namespace) -> dict[str, object]:
+    out: dict[str, object] = {}
+    goals: list[Goal] = []
+    if "pty" not in args.skip:
+        pty = await measure_pty(args.duration, args.e2e_batch, args.scenario)
+        out["pty"] = pty
+        e2e = pty["e2e_estimate_us"]
+        assert isinstance(e2e, dict)
+        goals.append(Goal("e2e_p99_us", e2e["p99"], E2E_P99_GOAL_US, at_most=True, unit=" us"))
+        cpu = pty["cpu_percent"]
+        assert isinstance(cpu, float)
+        goals.append(Goal("daemon_cpu_percent", cpu, CPU_GOAL_PERCENT, at_most=True, unit=" %"))
+    if "in-process" not in args.skip:
+        batches = [int(b) for b in str(args.batches).split(",") if b.strip()]
+        inproc = await measure_in_process(args.duration, batches, args.scenario)
+        out["in_process"] = inproc
+        runs = inproc["runs"]
+        assert isinstance(runs, list)
+        for r in runs:
+            p99 = r["processing_us"]["p99"]
+            name = f"processing_p99_us_batch{r['batch']}"
+            goals.append(Goal(name, p99, PROCESSING_P99_GOAL_US, at_most=True, unit=" us"))
+    out["goals"] = goals_block(goals)
+    return out
+
+
+def run(args: argparse.Namespace) -> dict[str, object]:
+    return asyncio.run(run_async(args))

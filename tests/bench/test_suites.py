@@ -1,0 +1,172 @@
+"""Each suite in a short mode prints one JSON object with the keys the issue asks for."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+
+import pytest
+
+from dthc_bridge.bench import cli
+from dthc_bridge.bench.control import plan_cuts
+from dthc_bridge.bench.latency import board_bound, rectangle_program
+from dthc_bridge.bench.report import Goal, percentiles
+
+HEADER = {"suite", "command", "python", "machine", "goals", "pass"}
+
+
+def run_main(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, dict[str, object]]:
+    code = cli.main(list(argv))
+    out = capsys.readouterr().out
+    lines = out.strip().splitlines()
+    assert len(lines) == 1, out  # one JSON object, nothing else on stdout
+    report = json.loads(lines[0])
+    assert isinstance(report, dict)
+    return code, report
+
+
+def test_codec_suite(capsys: pytest.CaptureFixture[str]) -> None:
+    code, report = run_main(capsys, "codec", "--json", "--count", "3000", "--repeats", "1")
+    assert code == 0
+    assert report.keys() >= HEADER
+    assert report["suite"] == "codec"
+    assert report["command"] == "dthc-bridge bench codec --json --count 3000 --repeats 1"
+    machine = report["machine"]
+    assert isinstance(machine, dict)
+    assert {"cpu", "nproc"} <= machine.keys()
+    assert isinstance(report["decode_msgs_per_s"], int)
+    assert isinstance(report["encode_msgs_per_s"], int)
+    goals = report["goals"]
+    assert isinstance(goals, dict)
+    assert set(goals) == {"decode_msgs_per_s"}
+
+
+def test_control_suite_on_two_short_scenarios(capsys: pytest.CaptureFixture[str]) -> None:
+    code, report = run_main(
+        capsys, "control", "--json", "--scenarios", "flat_clean,warped_sheet", "--seeds", "1",
+        "--max-path-mm", "250",
+    )  # fmt: skip
+    assert code == 0  # no --check: a missed goal is reported, not an error
+    assert report.keys() >= HEADER
+    assert {"scenarios", "worst_rms_ratio", "total_dives"} <= report.keys()
+    scenarios = report["scenarios"]
+    assert isinstance(scenarios, list)
+    assert [s["scenario"] for s in scenarios] == ["flat_clean", "warped_sheet"]
+    for s in scenarios:
+        for kind in ("ours", "reference", "no_thc"):
+            figures = s[kind]
+            assert {"rms_mm", "max_mm", "dives", "locked_s", "cutting_s"} <= figures.keys()
+        assert s["no_thc"]["locked_s"] == s["no_thc"]["cutting_s"]  # disabled all along
+        assert s["rms_ratio"] == pytest.approx(s["ours"]["rms_mm"] / s["reference"]["rms_mm"], 1e-2)
+    assert report["worst_rms_ratio"] == max(s["rms_ratio"] for s in scenarios)
+    assert report["total_dives"] == sum(s["ours"]["dives"] for s in scenarios)
+
+
+def test_check_turns_a_missed_goal_into_exit_status_1(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def fake(args: argparse.Namespace) -> dict[str, object]:
+        return {"goals": {"x": Goal("x", 2.0, 1.0, at_most=True).as_dict()}}
+
+    monkeypatch.setitem(cli.SUITES, "fake", cli.Suite("fake", "a test suite", lambda p: None, fake))
+    assert run_main(capsys, "fake", "--json")[0] == 0
+    code, report = run_main(capsys, "fake", "--json", "--check")
+    assert code == 1
+    assert report["pass"] is False
+
+
+def test_text_output_is_a_table(capsys: pytest.CaptureFixture[str]) -> None:
+    code = cli.main(
+        ["control", "--scenarios", "flat_clean", "--seeds", "1", "--max-path-mm", "150"]
+    )
+    out = capsys.readouterr().out
+    assert code == 0
+    assert out.splitlines()[0].startswith("scenario")
+    assert "goal rms_ratio_every_scenario" in out
+
+
+@pytest.mark.slow
+def test_latency_suite_short_run_as_a_module() -> None:
+    """``python -m dthc_bridge.bench latency --json --duration 2``: mock on a pty and in-process."""
+    done = subprocess.run(
+        [sys.executable, "-m", "dthc_bridge.bench", "latency", "--json", "--duration", "2"],
+        capture_output=True, text=True, timeout=55, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report.keys() >= HEADER
+    pty = report["pty"]
+    assert pty["batches"] >= 1500
+    assert pty["answered_batches"] == pty["batches"]
+    assert pty["thc_active_fraction"] > 0.9
+    for key in ("e2e_estimate_us", "host_us", "rtt_us", "board_bound_us"):
+        assert {"p50", "p99", "max"} <= pty[key].keys()
+    assert 0 < pty["cpu_percent"] < 100
+    assert pty["rss_mb"] > 10
+    runs = report["in_process"]["runs"]
+    assert [r["batch"] for r in runs] == [1, 5]
+    for r in runs:
+        assert r["answers"] == r["batches"]
+        assert r["thc_active_fraction"] > 0.8  # a stalled feed can trip the slope lock
+        assert 0 < r["processing_us"]["p50"] <= r["processing_us"]["p99"]
+    assert set(report["goals"]) == {
+        "e2e_p99_us", "daemon_cpu_percent", "processing_p99_us_batch1",
+        "processing_p99_us_batch5",
+    }  # fmt: skip
+
+
+def test_programs_split_into_cuts_with_a_slow_down_at_the_end() -> None:
+    plans = plan_cuts(
+        ["G21 G90", "G0 X50 Y100", "G1 X450 Y100 F5500", "G0 X450 Y200", "G1 X50 Y200"]
+    )
+    assert [p.approach for p in plans] == ["G0 X50 Y100", "G0 X450 Y200"]
+    assert plans[0].slow == ()
+    assert plans[1].slow_feed_mm_min == 2750.0
+    assert plans[1].programmed_feed_mm_min == 5500.0
+    short = plan_cuts(["G0 X0 Y0", "G1 X100 Y0 F1000", "G1 X100 Y100"], max_path_mm=150)
+    assert short[0].lines == ("G1 X100 Y0 F1000", "G1 X100.000 Y50.000")
+
+
+def test_board_bound_finds_the_first_batch_showing_the_answer() -> None:
+    # (stream_seq, t_last_us, zvel_seq, samples)
+    batches = [(0, 1000, 0, 1), (1, 2000, 0, 1), (2, 3000, 1, 1), (3, 4000, 2, 1), (4, 5000, 2, 1)]
+    answers = [(0, 0, 1, 0), (0, 0, 2, 1), (0, 0, 3, 2)]  # the third is never shown
+    bounds, after = board_bound(batches, answers)
+    assert bounds == [2000, 2000]
+    assert after == {"2": 2}
+
+
+def test_percentiles_and_goals() -> None:
+    p = percentiles([float(i) for i in range(1, 101)])
+    assert (p["p50"], p["p99"], p["max"], p["n"]) == (50.0, 99.0, 100.0, 100)
+    assert percentiles([])["p99"] is None
+    assert Goal("g", 1.0, 2.0, at_most=True).ok
+    assert not Goal("g", None, 2.0, at_most=True).ok
+    assert Goal("g", 3.0, 2.0, at_most=False).as_dict()["target"] == ">= 2"
+
+
+def test_the_pty_program_keeps_xy_moving_long_enough() -> None:
+    lines = rectangle_program(30.0)
+    assert lines[:2] == ["G21 G90", "G0 X100 Y100"]
+    assert len(lines) >= 2 + 8
+
+
+def test_ours_can_be_retuned_from_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    base = [
+        "control",
+        "--json",
+        "--scenarios",
+        "flat_clean",
+        "--seeds",
+        "1",
+        "--max-path-mm",
+        "150",
+    ]
+    _, default = run_main(capsys, *base)
+    _, tuned = run_main(capsys, *base, "--ours", "kp_per_s=40,deadband_v=0.05")
+    assert default["scenarios"][0]["ours"] != tuned["scenarios"][0]["ours"]  # type: ignore[index]
+    assert default["scenarios"][0]["reference"] == tuned["scenarios"][0]["reference"]  # type: ignore[index]
+    with pytest.raises(SystemExit, match="unknown ThcConfig field"):
+        cli.main([*base, "--ours", "gain=3"])
