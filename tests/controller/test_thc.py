@@ -195,3 +195,16 @@ def test_locks_prevent_the_dive_an_unlocked_thc_makes(
     assert dives_locked == 0
     assert dives_unlocked > 0
     assert worst_unlocked > 2 * worst_locked
+
+
+def test_batches_read_together_do_not_look_like_a_steep_slope() -> None:
+    """Two batches handed over at the same instant (one read) keep their sample spacing:
+    a 100 V/s ramp, under the 250 V/s void slope, never locks."""
+    thc = running()
+    void_locked = 0
+    for i in range(40):
+        t = 0.005 * (i // 2 + 1)  # pairs of batches arrive with the same time stamp
+        thc.observe_speed(100.0, 100.0, t)
+        thc.update([120.0 + 0.5 * i] * 5, PERIOD, t, 0.005)
+        void_locked += Lock.VOID in thc.locks(t)
+    assert void_locked == 0

@@ -222,3 +222,20 @@ async def test_telemetry_stream_yields_samples_with_board_order(rig: Rig) -> Non
             break
     await stream.aclose()
     assert seqs == [(seqs[0] + i) & 0xFFFF for i in range(10)]
+
+
+async def test_a_fault_latched_before_the_session_comes_from_status_not_reports(
+    rig: Rig,
+) -> None:
+    """A lease fault latched while unplugged is seen in the handshake STATUS; its 250 ms
+    re-reports are history and are not passed on as new events."""
+    fw = rig.sim.board.firmware
+    fw.session = True
+    fw._latch(fp.FaultCode.LEASE_EXPIRED)  # noqa: SLF001 - set up the board's state
+    reports: list[fp.Message] = []
+    rig.supervisor.on_report = reports.append
+    session = await rig.supervisor.wait_online(2.0)
+    assert session.initial_status is not None
+    assert session.initial_status.faults & (1 << fp.FaultCode.LEASE_EXPIRED)
+    await asyncio.sleep(0.6)  # two or three re-reports of the same fault
+    assert not [m for m in reports if isinstance(m, fp.Fault)]
