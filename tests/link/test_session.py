@@ -231,7 +231,7 @@ async def test_a_fault_latched_before_the_session_comes_from_status_not_reports(
     re-reports are history and are not passed on as new events."""
     fw = rig.sim.board.firmware
     fw.session = True
-    fw._latch(fp.FaultCode.LEASE_EXPIRED)  # noqa: SLF001 - set up the board's state
+    fw._latch(fp.FaultCode.LEASE_EXPIRED)
     reports: list[fp.Message] = []
     rig.supervisor.on_report = reports.append
     session = await rig.supervisor.wait_online(2.0)
