@@ -28,6 +28,9 @@ from .report import Goal, goals_block
 
 __all__ = ["add_arguments", "run"]
 
+# A request unanswered this long counts as lost (the daemon's own deadline is 30 s).
+REQUEST_TIMEOUT_S = 40.0
+
 
 class CountingClient(DaemonClient):
     """The sender's MQTT client, counting every request's fate."""
@@ -90,7 +93,8 @@ async def _soak(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
         while time.monotonic() - t0 < duration:
             runs += 1
             try:
-                report = await stack.send(lines, daemon=stack.daemon_client(CountingClient))
+                client = stack.daemon_client(CountingClient, timeout_s=REQUEST_TIMEOUT_S)
+                report = await stack.send(lines, daemon=client)
             except (aiomqtt.MqttError, DaemonError, OSError) as exc:
                 stopped.append(f"sender: {exc}")
                 await asyncio.sleep(0.5)

@@ -245,10 +245,12 @@ class Stack:
             await asyncio.sleep(0.05)
         raise RuntimeError("the daemon did not bring the board online in time: see daemon.log")
 
-    def daemon_client(self, cls: type[DaemonClient] = DaemonClient) -> DaemonClient:
+    def daemon_client(
+        self, cls: type[DaemonClient] = DaemonClient, timeout_s: float = 60.0
+    ) -> DaemonClient:
         return cls(
             "127.0.0.1", self.broker.port, base_topic=self.base,
-            board_id=self.options.board_id, protocol=self.broker.protocol,
+            board_id=self.options.board_id, protocol=self.broker.protocol, timeout_s=timeout_s,
         )  # fmt: skip
 
     async def send(

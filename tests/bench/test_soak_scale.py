@@ -17,6 +17,7 @@ def _args(module: object, *argv: str) -> argparse.Namespace:
     return parser.parse_args(list(argv))
 
 
+@pytest.mark.timeout(240)  # 21 s of faults, then the last program run finishes
 def test_soak_loses_no_command_and_never_leaves_the_torch_on() -> None:
     """20 s under bit errors, drops, an unplug, a reboot and a broker restart."""
     result = soak.run(_args(soak, "--minutes", "0.35"))
@@ -29,6 +30,7 @@ def test_soak_loses_no_command_and_never_leaves_the_torch_on() -> None:
     assert result["recoveries"] >= 1  # the unplug, at least, was recovered from
 
 
+@pytest.mark.timeout(180)
 def test_scale_runs_two_tables_on_one_broker() -> None:
     """Two daemons and two mock boards on one broker both complete their program."""
     result = scale.run(_args(scale, "--tables", "2"))

@@ -9,7 +9,7 @@ import pytest
 from dthc_bridge.demo import Stack, StackOptions, program_lines
 from dthc_bridge.demo.summary import summarize
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
 
 async def run(program: str, scenario: str, tmp_path: Path, **options: object) -> dict[str, object]:
