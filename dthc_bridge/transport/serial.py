@@ -9,13 +9,12 @@ then closes the port and we report ``on_lost(TransportError)`` once.
 
 from __future__ import annotations
 
-import asyncio
-
 import serial
 import serial_asyncio_fast
 import structlog
 
-from .base import BytesCallback, LostCallback, Transport, TransportError
+from .base import BytesCallback, LostCallback, TransportError
+from .stream import StreamTransport
 
 __all__ = ["CLOSE_TIMEOUT_S", "SerialTransport", "open_serial"]
 
@@ -25,46 +24,25 @@ CLOSE_TIMEOUT_S = 2.0
 """Bound on draining the output queue and closing the port in :meth:`SerialTransport.close`."""
 
 
-class _SerialProtocol(asyncio.Protocol):
-    """Forwards pyserial-asyncio-fast's protocol calls to the owning :class:`SerialTransport`."""
-
-    def __init__(self, owner: SerialTransport) -> None:
-        self._owner = owner
-
-    def data_received(self, data: bytes) -> None:
-        self._owner._data_received(data)
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        self._owner._connection_lost(exc)
-
-
-class SerialTransport(Transport):
+class SerialTransport(StreamTransport):
     """An open serial port. Create with :func:`open_serial` (or ``open_transport``)."""
 
-    def __init__(self, url: str, on_bytes: BytesCallback, on_lost: LostCallback) -> None:
-        self.url = url
-        self._on_bytes = on_bytes
-        self._on_lost = on_lost
-        self._loop = asyncio.get_running_loop()
-        self._lib_transport: serial_asyncio_fast.SerialTransport | None = None
-        self._open = False
-        self._closing = False
-        self._reported = False
-        self._released: asyncio.Future[None] = self._loop.create_future()
+    kind = "serial port"
+    close_timeout_s = CLOSE_TIMEOUT_S
+    _lib: serial_asyncio_fast.SerialTransport | None
 
     async def _open_port(self, baudrate: int) -> None:
         try:
             transport, _ = await serial_asyncio_fast.create_serial_connection(
                 self._loop,
-                lambda: _SerialProtocol(self),
+                self._protocol,
                 self.url,
                 baudrate=baudrate,
                 exclusive=True,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(self.url, f"cannot open serial port: {exc}") from exc
-        self._lib_transport = transport
-        self._open = True
+        self._opened(transport)
         try:
             port = transport.serial
             if port is not None:
@@ -72,20 +50,8 @@ class SerialTransport(Transport):
         except (ValueError, OSError, serial.SerialException) as exc:
             log.debug("serial_low_latency_unsupported", url=self.url, reason=str(exc))
 
-    @property
-    def is_open(self) -> bool:
-        lib = self._lib_transport
-        return self._open and lib is not None and not lib.is_closing()
-
-    def write(self, data: bytes) -> None:
-        lib = self._lib_transport
-        if lib is None or not self.is_open:
-            raise TransportError(self.url, "write on a closed serial port")
-        # Errors surface asynchronously: the wrapper aborts and connection_lost reports them.
-        lib.write(data)
-
     def discard_output(self) -> None:
-        lib = self._lib_transport
+        lib = self._lib
         if lib is None or not self.is_open:
             return
         # "flush" in pyserial-asyncio-fast drops its own buffer; reset_output_buffer drops the
@@ -97,44 +63,11 @@ class SerialTransport(Transport):
         except (serial.SerialException, OSError, ValueError) as exc:
             log.debug("serial_discard_output_failed", url=self.url, reason=str(exc))
 
-    async def close(self) -> None:
-        lib = self._lib_transport
-        if lib is None:
-            return
-        first = self._open
-        self._open = False
-        self._closing = True
-        if first and not lib.is_closing():
-            lib.close()  # drains queued bytes, then closes the port
-        try:
-            async with asyncio.timeout(CLOSE_TIMEOUT_S):
-                await asyncio.shield(self._released)
-        except TimeoutError:
-            log.warning("serial_close_timeout", url=self.url, timeout_s=CLOSE_TIMEOUT_S)
-        if first:
-            self._report(None)
+    async def _close_timed_out(self) -> None:
+        log.warning("serial_close_timeout", url=self.url, timeout_s=CLOSE_TIMEOUT_S)
 
-    # --- called by _SerialProtocol ----------------------------------------------------------
-
-    def _data_received(self, data: bytes) -> None:
-        if self._open:
-            self._on_bytes(data)
-
-    def _connection_lost(self, exc: Exception | None) -> None:
-        if not self._released.done():
-            self._released.set_result(None)
-        if self._closing:
-            return  # close() reports on_lost(None)
-        self._open = False
-        detail = f"connection lost: {exc}" if exc is not None else "closed by the driver"
-        error = TransportError(self.url, detail)
-        error.__cause__ = exc
-        self._report(error)
-
-    def _report(self, exc: Exception | None) -> None:
-        if not self._reported:
-            self._reported = True
-            self._on_lost(exc)
+    def _lost_detail(self, exc: Exception | None) -> str:
+        return f"connection lost: {exc}" if exc is not None else "closed by the driver"
 
 
 async def open_serial(
