@@ -62,7 +62,7 @@ class ControllerService:
         self._events: list[asyncio.Queue[dict[str, object]]] = []
         self._background: set[asyncio.Task[None]] = set()
         self._requested_feed_mm_s: float | None = None
-        self._telemetry: dict[str, object] | None = None
+        self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self._board_limits_set = False
         client.add_listener(self._on_board)
@@ -132,7 +132,19 @@ class ControllerService:
         return out
 
     def telemetry(self) -> dict[str, object] | None:
-        return self._telemetry
+        if self._last_batch is None:
+            return None
+        t, z_mm, xy = self._last_batch
+        thc = self.seq.thc
+        return {
+            "t": round(t, 4),
+            "state": str(self.seq.state),
+            "voltage_v": thc.filtered_v,
+            "target_v": thc.target_v,
+            "z_mm": z_mm,
+            "xy_speed_mm_s": xy,
+            "locks": sorted(str(lock) for lock in thc.locks(t)),
+        }
 
     async def subscribe_events(self) -> AsyncIterator[dict[str, object]]:
         queue: asyncio.Queue[dict[str, object]] = asyncio.Queue(EVENT_QUEUE_SIZE)
@@ -270,15 +282,9 @@ class ControllerService:
             xy = item.xy_speed_dmm_s / 10 if item.has_xy_speed else None
             volts = [cv / 100 for cv in item.samples_cv]
             seq.on_samples(volts, item.period_us / 1e6, z_mm, xy, self._requested_feed_mm_s, now)
-            self._telemetry = {
-                "t": round(now, 4),
-                "state": str(seq.state),
-                "voltage_v": seq.thc.filtered_v,
-                "target_v": seq.thc.target_v,
-                "z_mm": z_mm,
-                "xy_speed_mm_s": xy,
-                "locks": sorted(str(lock) for lock in seq.thc.locks(now)),
-            }
+            # Only what the batch brought is kept here; telemetry() builds the point at the
+            # MQTT rate, not at the sample rate.
+            self._last_batch = (now, z_mm, xy)
         elif isinstance(item, fp.Event):
             seq.on_inputs(item.inputs, item.z_um / 1000, now)
         elif isinstance(item, fp.Fault):
@@ -312,8 +318,7 @@ class ControllerService:
         elif state in (LinkState.OFFLINE, LinkState.INCOMPATIBLE):
             self.seq.on_link_down(reason)
             # The torch-off request cannot reach an absent board; the board's lease does it.
-            with contextlib.suppress(asyncio.QueueFull):
-                self._pump()
+            self._pump()
 
     async def _setup_board(self, setup: Callable[[BoardClient], Awaitable[None]]) -> None:
         try:

@@ -11,7 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from . import actions as act
 from .commands import (
     Command,
     CommandError,
@@ -91,7 +90,7 @@ class PlasmaController:
             return Outcome(data={"resume_line": command.line, "index": len(self.resume_points) - 1})
         elif isinstance(command, SetCurrent):
             self.current_a = command.current_a
-            seq._emit(act.SetCurrent(command.current_a))
+            seq.request_current(command.current_a)
         elif isinstance(command, VoltageMode):
             volts = None if command.auto else command.volts
             seq.set_params(replace(seq.params, cut_voltage_v=volts))
@@ -105,7 +104,6 @@ class PlasmaController:
             if seq.state is not State.S1_WAIT:
                 raise CommandError("cycle_start", f"nothing waits for cycle start ({seq.state})")
             seq.cycle_start(now)
-            return Outcome(deferred=False)
         elif isinstance(command, Rearm):
             if seq.state is not State.FAULTED:
                 raise CommandError("rearm", f"nothing to re-arm ({seq.state})")

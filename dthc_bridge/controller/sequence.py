@@ -135,7 +135,6 @@ class CutSequence:
         self._debounced = 0
         self._pending_bits: dict[int, float] = {}
         self._z_mm = math.nan
-        self._xy_speed: float | None = None
         self._requested_mm_s: float | None = None
         self._last_thc_t: float | None = None
         self._voltages: deque[float] = deque(maxlen=10)
@@ -213,6 +212,10 @@ class CutSequence:
             self.thc_z_feed_mm_min = z_feed_mm_min  # remembered until overwritten
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = enabled
+
+    def request_current(self, current_a: float) -> None:
+        """Plasma current set point (analog output): passed to the board as it comes."""
+        self._emit(act.SetCurrent(current_a))
 
     def adjust_voltage(self, delta_v: float) -> None:
         self.voltage_offset_v += delta_v
@@ -479,7 +482,6 @@ class CutSequence:
         self.now = now
         self._z_mm = z_mm
         self._voltages.extend(volts)
-        self._xy_speed = xy_speed_mm_s
         if requested_feed_mm_s is not None:
             # The programmed feed, not the reduced one: an M67 E3 reduction locks THC (PlasmaC).
             self._requested_mm_s = requested_feed_mm_s
@@ -514,7 +516,7 @@ class CutSequence:
         # taken at the first moment after it with the machine at speed, before the plate
         # has had time to drift away from the height that was just probed.
         arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
-        delay_done = now - arc_ok_since >= cfg.thc_delay_s and now - (cut.cutting_since or now) >= 0
+        delay_done = now - arc_ok_since >= cfg.thc_delay_s
         arc_lost_running = cut.arc_lost_since is not None
         self.thc.frozen = self.thc.target_v is None or arc_lost_running
         if delay_done and settled and self.thc.target_v is None:
@@ -701,7 +703,6 @@ class CutSequence:
         """Invariant 3: torch off, sender paused, Z to safe height, touch-off required."""
         self.error = reason
         self.probe_required = True
-        was = self.state
         self._enter(State.FAULTED)
         self._emit(act.Torch(False), act.ZVelocity(0.0), act.OhmicSense(False))
         if self.cut is not None and not math.isnan(self.cut.zero_mm):
@@ -713,7 +714,6 @@ class CutSequence:
         )
         self._emit(act.PauseProgram(reason))
         self._reply(False, reason)
-        del was
 
 
 def with_board_limits(config: SequenceConfig, z_min_mm: float, z_max_mm: float) -> SequenceConfig:
