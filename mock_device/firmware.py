@@ -149,6 +149,7 @@ class BoardFirmware:
         self.zvel_seq = 0
         self.zvel_applied = False  # the stream restarts with each session
         self.zvel_expiry_us: int | None = None
+        self.zvel_velocity_um_s = 0
         self.move_seq: int | None = None
         self.probe: _Probe | None = None
         self.last_probe_result: fp.ProbeResult | None = None
@@ -387,6 +388,7 @@ class BoardFirmware:
         if self.probe is not None or self.move_seq is not None:
             self._end_motion(fp.MotionResult.SUPERSEDED, fp.ProbeOutcome.ABORTED)
         self.plant.zaxis.jog(msg.velocity_um_s / 1000.0)
+        self.zvel_velocity_um_s = msg.velocity_um_s
         self.zvel_expiry_us = self.t_us + msg.expiry_ms * 1000
 
     def _configure(self, msg: fp.Configure) -> None:
@@ -493,12 +495,12 @@ class BoardFirmware:
             self._latch(FaultCode.BREAKAWAY)
         if inputs & (1 << InputBit.ESTOP):
             self._latch(FaultCode.ESTOP)
-        z = self.plant.zaxis
-        if not z.is_idle or self.probe is not None:
-            hit = z.limit_hit
-            moving_into = hit is not None and (self.probe is not None or self.zvel_expiry_us)
-            if moving_into and hit is not None:
-                self._latch(FaultCode.Z_LIMIT, 0 if hit == "min" else 1)
+        # A velocity stream driving Z into a soft limit latches Z_LIMIT (PROTOCOL.md §6.1);
+        # a probe reaching Z min ends with result LIMIT instead, and a move is clamped.
+        hit = self.plant.zaxis.limit_hit
+        into_limit = hit is not None and (hit == "min") == (self.zvel_velocity_um_s < 0)
+        if into_limit and self.zvel_expiry_us is not None:
+            self._latch(FaultCode.Z_LIMIT, 0 if hit == "min" else 1)
         if self.torch_on and self.sampling.arc_lost_ms:
             if inputs & (1 << InputBit.ARC_OK):
                 self.arc_ok_seen = True

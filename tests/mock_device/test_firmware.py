@@ -217,3 +217,32 @@ def test_same_seed_reproduces_the_same_run() -> None:
 
     assert run(11) == run(11)
     assert run(11) != run(12)
+
+
+def test_probe_reaching_z_min_reports_limit_without_a_fault(host: SimHost) -> None:
+    """A probe that finds nothing above Z min ends with result LIMIT; no Z_LIMIT fault."""
+    host.open_session()
+    host.board.plant.zaxis.min_mm = 25.0  # the plate (20 mm) is below the soft limit
+    host.request(fp.OhmicSense(0, True))
+    ack = host.request(fp.ZProbe(0, 20_000, 60_000, 1 << InputBit.OHMIC))
+    assert isinstance(ack, fp.Ack)
+    for _ in range(100):
+        host.keep_alive_for(50)
+        if host.of_type(fp.ProbeResult):
+            break
+    result = host.of_type(fp.ProbeResult)[0]
+    assert result.result == fp.ProbeOutcome.LIMIT
+    assert host.board.firmware.faults == 0
+
+
+def test_z_velocity_into_a_soft_limit_latches_z_limit(host: SimHost) -> None:
+    """Driving Z up into its max with the THC stream latches Z_LIMIT (detail 1)."""
+    host.open_session()
+    for stream_seq in range(1, 200):
+        host.send(fp.ZVelocity(0, stream_seq, 60_000, 50), seq=0)
+        host.pump(5)
+        if host.board.firmware.faults:
+            break
+    assert host.board.firmware.faults & (1 << FaultCode.Z_LIMIT)
+    fault = host.of_type(fp.Fault)[0]
+    assert (fault.code, fault.detail) == (FaultCode.Z_LIMIT, 1)
