@@ -141,6 +141,8 @@ class ControllerService:
             "state": str(self.seq.state),
             "voltage_v": thc.filtered_v,
             "target_v": thc.target_v,
+            # While a steady slow-down is followed: the voltage it is held at.
+            "slow_target_v": thc.slow_target_v,
             "z_mm": z_mm,
             "xy_speed_mm_s": xy,
             "locks": sorted(str(lock) for lock in thc.locks(t)),

@@ -3,7 +3,8 @@
 Per scenario, the same seeds and the same path run three times through the real cut
 sequence over a :class:`~mock_device.sim.SimulatedBoard` (:class:`ClosedLoop`):
 
-- ``ours``: :class:`~dthc_bridge.controller.thc.ThcController` as configured by default;
+- ``ours``: :class:`~dthc_bridge.controller.thc.ThcController` as configured by default
+  (it follows a steady slow-down once its voltage rise has settled: ``slow_follow``);
 - ``reference``: :class:`~.reference.ReferenceThc`, the open controllers' common law;
 - ``no_thc``: THC disabled (``M666``): the torch holds the probed cut height.
 
@@ -17,7 +18,10 @@ Paths: the scenario's ``default_program``, split into one cut per ``G0`` (each c
 pierces and ends with M5), and a slow-down appended to the last cut: a straight segment
 towards the middle of the part at ``--slow-percent`` of the feed, during which the sender
 reports the programmed feed (a PlasmaC ``M67 E3`` velocity reduction), so velocity
-anti-dive must hold the torch.
+anti-dive must at least hold the torch: the reference holds it to the end of the cut, ours
+holds it until the voltage rise of the slower cut has settled and then follows the plate
+against the voltage measured then. Phases in ``rms_by_phase``: ``delay`` (THC delay),
+``active``, ``locked`` (any lock), ``slow_follow`` (ours, following a slow-down).
 """
 
 from __future__ import annotations
@@ -181,18 +185,20 @@ class BenchLoop(ClosedLoop):
             for lock in locks:
                 self.lock_s[str(lock)] = self.lock_s.get(str(lock), 0.0) + batch_s
             if self.plant.gantry.speed_mm_s > 0.0:
-                phase = _phase(locks)
+                phase = _phase(locks, self.seq.thc.slow_target_v is not None)
                 acc = self.phase_err.setdefault(phase, [0.0, 0.0])
                 acc[0] += 1
                 acc[1] += (self.plant.true_height_mm - self.cut_height_mm) ** 2
 
 
-def _phase(locks: frozenset[Lock]) -> str:
+def _phase(locks: frozenset[Lock], slow_follow: bool) -> str:
     if Lock.DISABLED in locks:
         return "disabled"
     if Lock.FROZEN in locks:
         return "delay"  # THC delay (or arc-lost delay): the same for every controller
-    return "locked" if locks else "active"
+    if locks:
+        return "locked"
+    return "slow_follow" if slow_follow else "active"
 
 
 @dataclass

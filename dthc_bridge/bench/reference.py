@@ -42,8 +42,11 @@ class ReferenceThc(ThcController):
     """Same interface as :class:`ThcController`; only ``filter``/``update``/``locks`` differ."""
 
     def __init__(self, reference: ReferenceConfig | None = None, config: ThcConfig | None = None):
-        # The open controllers unlock the moment the speed is back at 99 %: no hold.
-        super().__init__(replace(config or ThcConfig(), anti_dive_unlock_hold_s=0.0))
+        # The open controllers unlock the moment the speed is back at 99 %: no hold, and
+        # hold Z through a whole slow-down.
+        super().__init__(
+            replace(config or ThcConfig(), anti_dive_unlock_hold_s=0.0, slow_follow=False)
+        )
         self.reference = reference or ReferenceConfig()
         self._mean_v: float | None = None
         self._last_raw: float | None = None

@@ -182,6 +182,7 @@ class CutSequence:
             "g200_active": self.g200_active,
             "thc_enabled": self.thc_enabled,
             "target_v": self.thc.target_v,
+            "slow_target_v": self.thc.slow_target_v,
             "voltage_v": self.thc.filtered_v,
             "z_mm": None if math.isnan(self._z_mm) else round(self._z_mm, 3),
             "height_mm": (

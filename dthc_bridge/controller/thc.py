@@ -12,6 +12,13 @@ about the open controllers (plasma-facts.md):
 - **Hunting**: the command is limited in speed (M667 F) and in acceleration.
 - **Corner dive**: velocity anti-dive locks below A % of the requested feed and unlocks
   only above 99 %; missing or stale XY speed counts as locked.
+- **Long slow-downs** (a velocity reduction, a slow lead or hole): the velocity lock holds
+  Z while the XY speed changes. Once the speed has held steady below the lock threshold
+  and the voltage rise of the slower cut has settled (two consecutive windows of the
+  filtered voltage agree), the voltage measured then (never below the cut target: slowing
+  down only raises it) becomes a temporary target, and the loop follows the plate again
+  within ``slow_follow_max_mm`` of where it started. A change of speed or a stale speed
+  drops back to the plain lock, a void pauses it; at speed again, the cut target applies.
 - **Kerf and void dive**: the slope of the filtered voltage locks the THC above
   ``void_slope_v_s`` and holds the lock for a quiet period after the spike.
 - **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
@@ -37,9 +44,6 @@ class Lock(StrEnum):
     NO_SPEED = "no_speed"  # XY speed unknown or stale: counts as locked
 
 
-_FOLLOW_THROUGH = frozenset({Lock.VELOCITY})
-
-
 @dataclass(frozen=True)
 class ThcConfig:
     kp_per_s: float = 14.0  # Z mm/s per mm of height error (≈ 1.9 mm/s per volt at 7.5 V/mm)
@@ -57,12 +61,18 @@ class ThcConfig:
     # After the machine is back at speed the arc still carries the slow-down's voltage rise
     # for some tens of ms: stay locked that much longer.
     anti_dive_unlock_hold_s: float = 0.1
-    # While locked by anti-dive, keep following the plate's slope (learned by the
-    # integral term) scaled by the XY speed, instead of freezing Z on a rising sheet.
-    # Off by default: it helps on long slow-downs on a tilted sheet (masso_warped RMS
-    # 0.18 -> 0.15 mm) but the slope it learned belongs to the direction before a corner,
-    # and on the warped sheet it raised the worst error from 0.37 to 0.62 mm.
-    follow_plate_when_locked: bool = False
+    # Steady slow-downs: follow the plate against the voltage measured once the rise has
+    # settled (see the module docstring). Off: the velocity lock holds Z to the end.
+    slow_follow: bool = True
+    slow_min_settle_s: float = 0.15  # speed steady at least this long before measuring
+    slow_max_settle_s: float = 0.5  # the voltage never settled by then: stay locked
+    slow_window_s: float = 0.04  # the two windows compared for "settled", and averaged
+    slow_settled_v: float = 0.4  # settled: window means differ by no more than this
+    slow_steady_percent: float = 2.0  # "steady": within this % of the requested feed
+    slow_min_percent: float = 20.0  # slower than this (a stop, a creep) stays locked
+    slow_max_rise_v: float = 15.0  # a larger rise is no slow-down: stay locked
+    slow_error_average_s: float = 0.1  # time constant of the full-speed error carried over
+    slow_follow_max_mm: float = 1.5  # Z travel allowed while following a slow-down
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -89,6 +99,16 @@ class _State:
     next_sample_t: float | None = None
     last_speed_s: float = -1e9
     speed_ratio: float = 0.0
+    # Steady-speed tracking for slow-down following.
+    steady_speed_mm_s: float = -1.0
+    steady_since_s: float = 0.0
+    slow_recent: deque[tuple[float, float]] = field(default_factory=deque)  # (t, V filtered)
+    slow_target_v: float | None = None  # set while following a slow-down
+    # The filtered voltage error (V - target) while last at full speed and unlocked: how
+    # far off the torch already was when the slow-down began.
+    at_speed_error_v: float = 0.0
+    full_speed_integral_mm_s: float = 0.0  # the integral to restore at speed
+    slow_travel_mm: float = 0.0
 
 
 class ThcController:
@@ -127,6 +147,12 @@ class ThcController:
         s.last_speed_s = now_s
         ratio = 100.0 * xy_speed_mm_s / requested_mm_s
         s.speed_ratio = min(1.0, max(0.0, ratio / 100.0))
+        band = self.config.slow_steady_percent / 100.0 * requested_mm_s
+        if abs(xy_speed_mm_s - s.steady_speed_mm_s) > band:
+            s.steady_speed_mm_s = xy_speed_mm_s
+            s.steady_since_s = now_s
+            s.slow_recent.clear()
+            self._stop_following()
         if s.velocity_locked:
             if ratio < self.config.anti_dive_unlock_percent:
                 s.at_speed_since = None
@@ -149,7 +175,7 @@ class ThcController:
         if self.anti_dive_percent > 0.0:
             if now_s - s.last_speed_s > self.config.speed_stale_s:
                 found.add(Lock.NO_SPEED)
-            elif s.velocity_locked:
+            elif s.velocity_locked and s.slow_target_v is None:
                 found.add(Lock.VELOCITY)
         if now_s < s.void_until_s:
             found.add(Lock.VOID)
@@ -199,11 +225,17 @@ class ThcController:
         cfg = self.config
         s = self._s
         v_f = self.filter(samples_v, period_s, now_s)
+        self._follow_slow_down(v_f, now_s)
         locks = self.locks(now_s)
         error_mm = 0.0
         command = 0.0
-        if self.target_v is not None:
-            error_v = self.target_v - v_f  # positive: voltage low, torch too close
+        target_v = self.target_v if s.slow_target_v is None else s.slow_target_v
+        if self.target_v is not None and not locks and s.slow_target_v is None:
+            # Averaged over about 0.1 s: one noisy sample must not set the next slow target.
+            a = min(1.0, dt_s / cfg.slow_error_average_s)
+            s.at_speed_error_v += a * (v_f - self.target_v - s.at_speed_error_v)
+        if target_v is not None:
+            error_v = target_v - v_f  # positive: voltage low, torch too close
             if abs(error_v) <= cfg.deadband_v:
                 error_v = 0.0
             else:
@@ -214,12 +246,83 @@ class ThcController:
                 lim = cfg.integral_limit_mm_s
                 s.integral_mm_s = max(-lim, min(lim, s.integral_mm_s))
                 command = cfg.kp_per_s * error_mm + s.integral_mm_s
-            elif locks <= _FOLLOW_THROUGH and cfg.follow_plate_when_locked:
-                # The voltage cannot be trusted, but the plate's slope can: the integral is
-                # the Z speed that followed it at full feed; scale it to the speed now.
-                command = s.integral_mm_s * s.speed_ratio
         limit = self.max_speed_mm_s
         command = max(-limit, min(limit, command))
+        if s.slow_target_v is not None:
+            # Following a slow-down on a measured target: bounded travel, braking in time
+            # to stop at the bound.
+            room = cfg.slow_follow_max_mm - s.slow_travel_mm * math.copysign(1.0, command)
+            room = max(0.0, room)
+            # The speed that still stops within ``room``: v·dt + v²/2a = room.
+            a = cfg.max_accel_mm_s2
+            braking = a * (math.sqrt(dt_s * dt_s + 2.0 * room / a) - dt_s)
+            command = max(-braking, min(braking, command))
         step = cfg.max_accel_mm_s2 * dt_s
         s.velocity_mm_s = max(s.velocity_mm_s - step, min(s.velocity_mm_s + step, command))
+        if s.slow_target_v is not None:
+            s.slow_travel_mm += s.velocity_mm_s * dt_s
         return ThcOutput(s.velocity_mm_s, locks, v_f, -error_mm)
+
+    @property
+    def slow_target_v(self) -> float | None:
+        """The temporary target while following a steady slow-down, else None."""
+        return self._s.slow_target_v
+
+    def _stop_following(self) -> None:
+        s = self._s
+        if s.slow_target_v is not None:
+            s.slow_target_v = None
+            s.integral_mm_s = s.full_speed_integral_mm_s
+
+    def _follow_slow_down(self, v_f: float, now_s: float) -> None:
+        """Enter or leave slow-down following (see the module docstring)."""
+        cfg = self.config
+        s = self._s
+        can_follow = (
+            cfg.slow_follow
+            and self.enabled
+            and not self.frozen
+            and self.target_v is not None
+            and self.anti_dive_percent > 0.0
+            and s.velocity_locked
+            and now_s - s.last_speed_s <= cfg.speed_stale_s
+            and s.speed_ratio * 100.0 >= cfg.slow_min_percent
+        )
+        if not can_follow:
+            self._stop_following()
+            return
+        # A void or a spike during the slow-down only pauses following (the VOID lock holds
+        # Z): the target measured for this speed is kept, not measured again on noise.
+        if s.slow_target_v is not None:
+            return
+        recent = s.slow_recent
+        if now_s < s.void_until_s:  # a void's voltage must not enter the windows
+            recent.clear()
+            return
+        steady_s = now_s - s.steady_since_s
+        if steady_s > cfg.slow_max_settle_s:
+            return  # it never settled (a burst, a steep plate): the lock holds
+        window = cfg.slow_window_s
+        recent.append((now_s, v_f))
+        while recent and recent[0][0] < now_s - 2.0 * window:
+            recent.popleft()
+        if steady_s < cfg.slow_min_settle_s or recent[0][0] > now_s - 1.5 * window:
+            return
+        older = [v for t, v in recent if t <= now_s - window]
+        newer = [v for t, v in recent if t > now_s - window]
+        if not older or not newer:
+            return
+        measured = sum(newer) / len(newer)
+        if abs(measured - sum(older) / len(older)) > cfg.slow_settled_v:
+            return
+        assert self.target_v is not None
+        if measured - self.target_v > cfg.slow_max_rise_v:
+            return
+        # Slowing down only raises the voltage: a measured value below the cut target
+        # means the torch is already low, and the cut target is the safe one. The error
+        # the torch already had at full speed is not kept.
+        s.slow_target_v = max(measured - s.at_speed_error_v, self.target_v)
+        s.full_speed_integral_mm_s = s.integral_mm_s
+        # The integral is the Z speed that followed the plate at full feed: scale it.
+        s.integral_mm_s *= s.speed_ratio
+        s.slow_travel_mm = 0.0

@@ -9,7 +9,9 @@ from typing import Any
 import pytest
 
 from dthc_bridge.bench.closed_loop import ClosedLoop
+from dthc_bridge.bench.control import plan_cuts, run_controller
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
+from mock_device.plant import load_scenario
 
 from .test_sequence import ready
 
@@ -122,6 +124,126 @@ def test_disabled_or_frozen_thc_holds_z() -> None:
     assert step(thc, 100.0, 0.010) == 0.0
 
 
+# --- steady slow-downs -------------------------------------------------------------------
+
+
+def slow_down(
+    thc: ThcController, volts: float, seconds: float, t: float, speed: float = 50.0
+) -> tuple[float, list[float]]:
+    """Run at ``speed`` % of the requested feed with a constant voltage; (t, velocities)."""
+    out = []
+    for _ in range(round(seconds / 0.005)):
+        t += 0.005
+        out.append(step(thc, volts, t, speed=speed))
+    return t, out
+
+
+def test_a_steady_slow_down_is_followed_against_the_voltage_measured_once_settled() -> None:
+    """At half speed the voltage settles 5 V higher: Z holds while it settles, then the
+    measured voltage is the target; a later change of height at that speed is followed."""
+    thc = running()
+    t, held = slow_down(thc, 125.0, 0.12, 0.0)
+    assert held == [0.0] * len(held)
+    assert Lock.VELOCITY in thc.locks(t)
+    t, _ = slow_down(thc, 125.0, 0.1, t)
+    assert thc.slow_target_v == pytest.approx(125.0)
+    assert not thc.locks(t)
+    # The plate rises under the torch: the voltage drops 2 V at the same slow speed.
+    t, moved = slow_down(thc, 123.0, 0.1, t)
+    assert moved[-1] > 0.5  # up, towards the measured slow-down voltage
+    assert thc.slow_target_v == pytest.approx(125.0)
+
+
+def test_following_stops_when_the_speed_changes_and_the_cut_target_returns_at_speed() -> None:
+    thc = running()
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    assert thc.slow_target_v is not None
+    t, out = slow_down(thc, 126.0, 0.005, t, speed=70.0)  # speeding up again: locked
+    assert thc.slow_target_v is None
+    assert Lock.VELOCITY in thc.locks(t)
+    t, out = slow_down(thc, 120.0, 0.2, t, speed=100.0)
+    assert not thc.locks(t)
+    assert thc.slow_target_v is None
+    assert out[-1] == 0.0  # 120 V is the cut target: nothing to correct
+
+
+def test_a_slow_down_voltage_below_the_cut_target_keeps_the_cut_target() -> None:
+    """Slowing down only raises the voltage: a lower reading means the torch is already
+    low, so the target is never set below the cut voltage and Z goes up."""
+    thc = running()
+    _, out = slow_down(thc, 117.0, 0.25, 0.0)
+    assert thc.slow_target_v == pytest.approx(120.0)
+    assert out[-1] > 0.0
+
+
+def test_the_error_at_full_speed_is_not_carried_into_the_slow_down_target() -> None:
+    """The torch ran 1.5 V high at speed (outside what the loop corrected yet); the 5 V rise
+    of the slow-down comes on top: the slow target is the rise alone."""
+    thc = running(deadband_v=5.0)  # a wide dead band: Z stays put at full speed
+    t = 0.0
+    for _ in range(100):
+        t += 0.005
+        step(thc, 121.5, t)
+    t, _ = slow_down(thc, 126.5, 0.3, t)
+    assert thc.slow_target_v == pytest.approx(125.0, abs=0.05)
+
+
+@pytest.mark.parametrize(
+    ("speed", "volts", "why"),
+    [(10.0, 125.0, "a creep below slow_min_percent"), (50.0, 140.0, "a rise above 15 V")],
+    ids=["too_slow", "rise_too_large"],
+)
+def test_slow_downs_that_cannot_be_trusted_stay_locked(
+    speed: float, volts: float, why: str
+) -> None:
+    thc = running()
+    t, out = slow_down(thc, volts, 0.6, 0.0, speed=speed)
+    assert thc.slow_target_v is None, why
+    assert Lock.VELOCITY in thc.locks(t)
+    assert out == [0.0] * len(out)
+
+
+def test_a_voltage_still_moving_at_the_end_of_the_settle_time_stays_locked() -> None:
+    """A voltage that keeps ramping (20 V/s: no settled rise) never becomes a target."""
+    thc = running()
+    t = 0.0
+    for i in range(120):
+        t += 0.005
+        assert step(thc, 125.0 + 0.1 * i, t, speed=50.0) == 0.0
+    assert thc.slow_target_v is None
+
+
+def test_a_void_pauses_following_and_keeps_the_measured_target() -> None:
+    thc = running()
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    assert thc.slow_target_v == pytest.approx(125.0)
+    for v in (135.0, 145.0, 155.0):  # 2000 V/s: a kerf
+        t += 0.005
+        assert step(thc, v, t, speed=50.0) == 0.0
+    assert Lock.VOID in thc.locks(t)
+    assert thc.slow_target_v == pytest.approx(125.0)
+
+
+def test_z_travel_while_following_a_slow_down_is_bounded() -> None:
+    """A voltage that never comes back (the arc stretching over a hole's slug) moves Z no
+    further than slow_follow_max_mm, then Z holds."""
+    thc = running(slow_follow_max_mm=0.5)
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    assert thc.slow_target_v is not None
+    t, out = slow_down(thc, 135.0, 2.0, t)
+    travel = sum(v * 0.005 for v in out)
+    assert -0.5 - 0.02 <= travel < -0.45
+    assert out[-1] == 0.0
+
+
+def test_slow_follow_off_holds_z_through_the_whole_slow_down() -> None:
+    thc = running(slow_follow=False)
+    t, out = slow_down(thc, 125.0, 1.0, 0.0)
+    assert thc.slow_target_v is None
+    assert Lock.VELOCITY in thc.locks(t)
+    assert out == [0.0] * len(out)
+
+
 # --- against the plant ---------------------------------------------------------------------
 
 
@@ -208,3 +330,21 @@ def test_batches_read_together_do_not_look_like_a_steep_slope() -> None:
         thc.update([120.0 + 0.5 * i] * 5, PERIOD, t, 0.005)
         void_locked += Lock.VOID in thc.locks(t)
     assert void_locked == 0
+
+
+def test_following_a_velocity_reduction_holds_height_on_a_warped_sheet() -> None:
+    """The MASSO program on masso_warped with a 50 % velocity reduction at the end (the
+    sender keeps reporting the programmed feed): holding Z through it lets the plate drift
+    away; following it against the settled voltage keeps the true height, without a dive."""
+    plans = plan_cuts(load_scenario("masso_warped").default_program, slow_percent=50.0)
+    held = run_controller(
+        "masso_warped", 1, "ours", plans, ours=ThcConfig(slow_follow=False)
+    ).as_dict()
+    followed = run_controller("masso_warped", 1, "ours", plans).as_dict()
+    assert held["dives"] == followed["dives"] == 0
+    assert isinstance(held["max_mm"], float)
+    assert isinstance(followed["max_mm"], float)
+    assert isinstance(held["rms_mm"], float)
+    assert isinstance(followed["rms_mm"], float)
+    assert followed["rms_mm"] < 0.7 * held["rms_mm"]
+    assert followed["max_mm"] < 0.6 * held["max_mm"]

@@ -261,3 +261,27 @@ def test_cutter_current_shifts_the_voltage_by_the_configured_volts_per_amp() -> 
     plant.set_current_a(scenario.arc.nominal_current_a + 20.0)
     plant.step(DT_S)
     assert plant.arc_voltage_v - before == pytest.approx(-4.0, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("feed_mm_min", "rise_fraction"),
+    [(5500.0, 0.0), (2750.0, 0.5), (7000.0, 0.0)],
+    ids=["material_feed", "half_feed", "faster_than_material"],
+)
+def test_a_slower_programmed_feed_raises_the_voltage_as_a_slow_down_does(
+    feed_mm_min: float, rise_fraction: float
+) -> None:
+    """The rise is measured against the material's cut feed, not the programmed feed: a
+    hole or velocity reduction programmed at half the cut feed settles half the full-stop
+    rise above the cut voltage; the cut feed or faster gives none."""
+    scenario = quiet()
+    assert scenario.material.cut_feed_mm_min == 5500.0
+    plant = Plant(scenario, seed=9)
+    goto_xy(plant, 50.0, 50.0)
+    fire(plant)
+    plant.advance(1.0)
+    plant.gantry.feed_line(f"G1 X1000 Y50 F{feed_mm_min:g}")
+    run_until(plant, lambda p: p.gantry.x_mm > 400.0, 30.0)
+    assert plant.xy_speed_mm_s == pytest.approx(feed_mm_min / 60.0, rel=1e-6)
+    rise = plant.arc_voltage_v - scenario.material.cut_voltage_v
+    assert rise == pytest.approx(rise_fraction * scenario.arc.rise_v, abs=0.05)
