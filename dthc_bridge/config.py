@@ -57,6 +57,9 @@ class ThcSettings(_Closed):
     max_speed_mm_s: float = Field(30.0, gt=0.0, le=100.0)
     max_accel_mm_s2: float = Field(500.0, gt=0.0, le=5000.0)
     void_slope_v_s: float = Field(250.0, gt=0.0)
+    # Follow a steady slow-down once its voltage rise has settled (False: hold Z through it).
+    slow_follow: bool = True
+    slow_follow_max_mm: float = Field(1.5, ge=0.0, le=10.0)
 
     def build(self) -> ThcConfig:
         return ThcConfig(**self.model_dump())

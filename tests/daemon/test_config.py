@@ -91,3 +91,14 @@ def test_broken_toml_is_reported_with_the_file(tmp_path: Path) -> None:
     path.write_text("[board\nlink = 1")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(path)
+
+
+def test_slow_down_following_can_be_switched_off(tmp_path: Path) -> None:
+    """``controller.thc.slow_follow = false`` reaches the controller: Z holds through
+    every slow-down, as the open controllers do."""
+    path = tmp_path / "config.toml"
+    path.write_text("[controller.thc]\nslow_follow = false\nslow_follow_max_mm = 0.8\n")
+    thc = load_config(path).controller.thc.build()
+    assert thc.slow_follow is False
+    assert thc.slow_follow_max_mm == 0.8
+    assert load_config(None).controller.thc.build().slow_follow is True
