@@ -45,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
         " motion backend (port 0 picks a free one; READY prints it)",
     )  # fmt: skip
     p.add_argument("--default-program", action="store_true", help="run the scenario's path")
+    p.add_argument(
+        "--latency-log", type=Path, help="write JSON lines here on exit: when each Z_VELOCITY"
+        " arrived and each SAMPLES frame was sent, in real-clock board time",
+    )  # fmt: skip
     f = p.add_argument_group("fault injection (SIGUSR1 unplugs, SIGUSR2 reboots)")
     f.add_argument("--bit-flip-rate", type=float, default=0.0, help="per byte")
     f.add_argument("--drop-frame-rate", type=float, default=0.0, help="per board frame")
@@ -102,7 +106,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         link = TcpLink(host, port, lambda _: None)
     gantry = _parse_listen(args.gantry_listen) if args.gantry_listen else None
     options = ProcessOptions(
-        duration_s=args.duration, truth_path=args.truth, program=program, gantry=gantry
+        duration_s=args.duration,
+        truth_path=args.truth,
+        program=program,
+        gantry=gantry,
+        latency_log=args.latency_log,
     )
     return asyncio.run(MockBoardProcess(board, link, plan, options).run())
 

@@ -162,6 +162,9 @@ class BoardFirmware:
         # Fault injection: replies built while stalled are never sent.
         self.stall_replies_until_us = 0
         self.decoder = fp.StreamDecoder(on_error=self._on_bad_frame)
+        # Instruments (the process's --latency-log); None, and never called, otherwise.
+        self.on_zvelocity: Callable[[fp.ZVelocity], None] | None = None
+        self.on_samples: Callable[[fp.Samples], None] | None = None
 
     # --- receive ---------------------------------------------------------------------------
 
@@ -222,6 +225,8 @@ class BoardFirmware:
             self._send(fp.Clock(msg.seq, self.t_us))
         elif isinstance(msg, fp.ZVelocity):
             self._z_velocity(msg)
+            if self.on_zvelocity is not None:
+                self.on_zvelocity(msg)
         elif not self.session:
             if msg.seq:
                 self._send(fp.Nak(msg.seq, self.boot_id, NakCode.NO_SESSION, 0))
@@ -631,12 +636,13 @@ class BoardFirmware:
             if self.identity.capabilities & fp.Capability.XY_SPEED
             else fp.XY_SPEED_UNKNOWN
         )
-        self._send(
-            fp.Samples(
-                0, self.sample_seq, self.batch_t0_us & 0xFFFFFFFF, s.period_us,
-                _um(self.plant.zaxis.position_mm), self.inputs, self.zvel_seq, xy,
-                self.status_bits(), tuple(self.batch),
-            )
+        msg = fp.Samples(
+            0, self.sample_seq, self.batch_t0_us & 0xFFFFFFFF, s.period_us,
+            _um(self.plant.zaxis.position_mm), self.inputs, self.zvel_seq, xy,
+            self.status_bits(), tuple(self.batch),
         )  # fmt: skip
+        self._send(msg)
+        if self.on_samples is not None:
+            self.on_samples(msg)
         self.sample_seq = (self.sample_seq + 1) & 0xFFFF
         self.batch.clear()

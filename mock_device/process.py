@@ -3,6 +3,9 @@
 The firmware and plant run in board time; each wake-up runs every tick that is due, then
 flushes what the board sent to the link. Host bytes are handled the moment they arrive,
 and their replies flushed at once, so acknowledgements do not wait for the next batch.
+
+``latency_log`` (``--latency-log PATH``) records, in real-clock board time, when each
+Z_VELOCITY arrived and when each SAMPLES frame was handed to the link (latency_log.py).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import firmware_protocol as fp
 
 from .faults import FaultPlan
 from .gantry_server import GantryServer
+from .latency_log import LatencyLog
 from .links import BoardLink
 from .sim import SimulatedBoard
 
@@ -34,6 +38,7 @@ class ProcessOptions:
     truth_path: Path | None = None
     program: tuple[str, ...] = ()
     gantry: tuple[str, int] | None = None  # host, port of the gantry control port
+    latency_log: Path | None = None  # JSON lines: Z_VELOCITY receipt, SAMPLES send times
 
 
 class MockBoardProcess:
@@ -50,20 +55,51 @@ class MockBoardProcess:
         self._unplug_task: asyncio.Task[None] | None = None
         self._stall_done = False
         self._gantry: GantryServer | None = None
+        self.latency: LatencyLog | None = None
+        self._rx_loop_s = 0.0
+        if options.latency_log is not None:
+            self.latency = LatencyLog(options.latency_log)
+            self._instrument()
         link.on_bytes = self._host_bytes
 
+    def _instrument(self) -> None:
+        """Hook the (current) firmware to the latency log."""
+        assert self.latency is not None
+        fw = self.board.firmware
+        fw.on_zvelocity = self._zvel_received
+        fw.on_samples = self.latency.samples_built
+
     def _host_bytes(self, data: bytes) -> None:
+        if self.latency is not None:
+            self._rx_loop_s = asyncio.get_running_loop().time()
         self.board.host_write(data)
         self._flush()
+
+    def _zvel_received(self, msg: fp.ZVelocity) -> None:
+        assert self.latency is not None
+        fw = self.board.firmware
+        current = fw.zvel_applied and fw.zvel_seq == msg.stream_seq
+        self.latency.zvel_received(msg.stream_seq, self._rx_loop_s, fw.t_us, current)
 
     def _flush(self) -> None:
         data = self.board.read()
         if not data:
             return
+        log = self.latency
         if self.plan.delay_ms:
-            asyncio.get_running_loop().call_later(self.plan.delay_ms / 1000, self.link.write, data)
+            sent = None if log is None else log.take_pending()
+            asyncio.get_running_loop().call_later(
+                self.plan.delay_ms / 1000, self._write_late, data, sent
+            )
         else:
             self.link.write(data)
+            if log is not None:
+                log.samples_sent(log.take_pending(), asyncio.get_running_loop().time())
+
+    def _write_late(self, data: bytes, sent: list[fp.Samples] | None) -> None:
+        self.link.write(data)
+        if self.latency is not None and sent:
+            self.latency.samples_sent(sent, asyncio.get_running_loop().time())
 
     async def unplug(self, for_s: float) -> None:
         """Close the pty master (the host sees EIO), wait, recreate it behind the same path."""
@@ -74,12 +110,17 @@ class MockBoardProcess:
         await self.link.close()
         await asyncio.sleep(for_s)
         self.board.read()  # what the board sent meanwhile went nowhere
+        if self.latency is not None:
+            self.latency.take_pending()
         await self.link.open()
         self._log("replug")
 
     def reboot(self) -> None:
         self.reboots += 1
         self.board.reboot()
+        if self.latency is not None:
+            self.latency.reboot(self.board.firmware.boot_id)
+            self._instrument()
         self._log("reboot", boot_id=f"{self.board.firmware.boot_id:08x}")
 
     def _log(self, event: str, **fields: object) -> None:
@@ -122,6 +163,8 @@ class MockBoardProcess:
         print(ready, flush=True)
         t0 = loop.time()
         fw_t0_us = self.board.firmware.t_us
+        if self.latency is not None:
+            self.latency.start(t0, fw_t0_us, self.board.firmware.boot_id)
         try:
             while not self.stop.is_set():
                 fw = self.board.firmware
@@ -158,6 +201,8 @@ class MockBoardProcess:
         return f"{self.board.firmware.boot_id:08x}"
 
     def _finish(self) -> None:
+        if self.latency is not None:
+            self.latency.write()
         truth = self.board.plant.truth
         if self.options.truth_path is not None:
             path = self.options.truth_path

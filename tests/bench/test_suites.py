@@ -11,7 +11,12 @@ import pytest
 
 from dthc_bridge.bench import cli
 from dthc_bridge.bench.control import plan_cuts
-from dthc_bridge.bench.latency import board_bound, rectangle_program
+from dthc_bridge.bench.latency import (
+    board_bound,
+    log_records,
+    match_board_e2e,
+    rectangle_program,
+)
 from dthc_bridge.bench.report import Goal, percentiles
 
 HEADER = {"suite", "command", "python", "machine", "goals", "pass"}
@@ -103,6 +108,21 @@ def test_latency_suite_short_run_as_a_module() -> None:
     assert pty["thc_active_fraction"] > 0.9
     for key in ("e2e_estimate_us", "host_us", "rtt_us", "board_bound_us"):
         assert {"p50", "p99", "max"} <= pty[key].keys()
+    e2e = pty["e2e"]
+    assert e2e["log"] is True
+    board = e2e["board_e2e_us"]
+    assert board["count"] >= 0.9 * pty["batches"]  # nearly every answer found in the mock's log
+    assert board["count"] == e2e["answers"] - e2e["answers_without_receipt"]
+    # Sanity bounds, not goals (a stalled machine may stretch the max, so it is not bounded).
+    assert 0 < board["p50"] <= board["p99"] < 50_000
+    assert board["p99"] <= board["max"]
+    net = e2e["board_e2e_net_of_mock_lag_us"]
+    assert 0 < net["p50"] <= net["p99"] < 50_000
+    assert net["p99"] <= net["max"]
+    lag = e2e["mock_send_lag_us"]
+    assert -5_000 < lag["p50"] <= lag["p99"] < 50_000
+    assert lag["p99"] <= lag["max"]
+    assert report["goals"]["e2e_p99_us"]["value"] == net["p99"]
     assert 0 < pty["cpu_percent"] < 100
     assert pty["rss_mb"] > 10
     runs = report["in_process"]["runs"]
@@ -136,6 +156,73 @@ def test_board_bound_finds_the_first_batch_showing_the_answer() -> None:
     bounds, after = board_bound(batches, answers)
     assert bounds == [2000, 2000]
     assert after == {"2": 2}
+
+
+def test_board_e2e_matches_answers_to_the_mocks_receipts_by_seq_and_board_time() -> None:
+    # Host: (stream_seq, t_last_us, zvel_seq, samples) per batch and (chunk_ns, out_ns,
+    # velocity_seq, batch index) per answer. Z_VELOCITY seq 7 is sent twice, 65536 frames
+    # apart (the 16-bit seq wrapped); seq 9's frame never reached the board.
+    batches = [
+        (100, 10_000, 0, 1),
+        (101, 11_000, 0, 1),
+        (102, 70_011_000, 0, 1),
+        (103, 70_012_000, 0, 1),
+    ]
+    answers = [
+        (1_000, 1_100, 7, 0),
+        (2_000, 2_050, 8, 1),
+        (3_000, 3_200, 7, 2),
+        (4_000, 4_100, 9, 3),
+        (5_000, 5_100, 10, -1),  # recording started while a batch was handled: skipped
+    ]
+    # Mock: (stream_seq, rx_board_us, rx_mono_ns), including frames from before the host
+    # recorded (seq 7 and 8 of an earlier lap) and after; and sends (stream_seq, t_last_us,
+    # tx_board_us, tx_mono_ns); batch 101's send is missing.
+    rx = [
+        (7, 5_000, 0),
+        (8, 6_000, 0),
+        (7, 10_400, 1_300),
+        (8, 11_900, 2_400),
+        (7, 70_011_250, 3_700),
+        (10, 70_013_000, 0),
+    ]
+    tx = [(100, 10_000, 10_200, 600), (102, 70_011_000, 70_011_050, 2_800)]
+    m = match_board_e2e(batches, answers, rx, tx)
+    assert m.answers == 4
+    assert m.no_receipt == 1  # seq 9
+    assert m.e2e_us == [400.0, 900.0, 250.0]
+    assert m.no_send == 1  # batch 101
+    assert m.send_lag_us == [200.0, 50.0]
+    assert m.net_us == [200.0, 200.0]
+    # Legs on the monotonic clock (ns -> us): send -> host read, host, host write -> receipt.
+    assert m.to_host_us == [0.4, 0.2]
+    assert m.host_us == [0.1, 0.2]
+    assert m.to_board_us == [0.2, 0.5]
+    # A 32-bit wrap of the samples' t_last_us in the send record still matches.
+    wrapped = match_board_e2e(
+        [(5, 0x1_0000_0010, 0, 1)],
+        [(0, 0, 3, 0)],
+        [(3, 0x1_0000_0100, 0)],
+        [(5, 0x10, 0x1_0000_0020, 0)],
+    )
+    assert wrapped.e2e_us == [240.0]
+    assert wrapped.send_lag_us == [16.0]
+
+
+def test_log_records_read_the_mocks_latency_log_up_to_a_reboot() -> None:
+    records: list[dict[str, object]] = [
+        {"kind": "start", "boot_id": "0000abcd", "fw_t0_us": 0},
+        {"kind": "samples_tx", "stream_seq": 4, "t0_us": 5000, "t_last_us": 9000,
+         "samples": 5, "zvel_seq": 0, "tx_board_us": 9100, "tx_mono_s": 1.5},
+        {"kind": "zvel_rx", "stream_seq": 1, "rx_board_us": 9300, "rx_mono_s": 1.0000002,
+         "fw_t_us": 9000, "current": True},
+        {"kind": "reboot", "boot_id": "00001234"},
+        {"kind": "zvel_rx", "stream_seq": 1, "rx_board_us": 50, "rx_mono_s": 2.0,
+         "fw_t_us": 0, "current": True},
+    ]  # fmt: skip
+    rx, tx = log_records(records)
+    assert rx == [(1, 9300, 1_000_000_200)]
+    assert tx == [(4, 9000, 9100, 1_500_000_000)]
 
 
 def test_percentiles_and_goals() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -143,3 +144,48 @@ def test_ground_truth_is_written_on_exit(tmp_path: Path) -> None:
     assert "true_height_mm" in header
     assert len(rows) >= 250
     assert not os.path.exists(tmp_path / "p")
+
+
+def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
+    """--latency-log: each Z_VELOCITY's receipt and each SAMPLES send, in board time."""
+    log = tmp_path / "latency.jsonl"
+    pty = tmp_path / "dthc0"
+    proc = _start(pty, "--latency-log", str(log))
+    seen: list[fp.Samples] = []
+    try:
+        with serial.Serial(str(pty), timeout=0.02) as port:
+            _exchange(port, fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5), fp.HelloInfo)
+            decoder = fp.StreamDecoder()
+            for seq in (1, 2, 2):  # the repeat is received, and not applied again
+                port.write(fp.encode(fp.ZVelocity(0, seq, 0, 50)))
+                deadline = time.monotonic() + 0.05
+                while time.monotonic() < deadline:
+                    seen += [m for m in decoder.feed(port.read(256)) if isinstance(m, fp.Samples)]
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(5) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    assert records[0]["kind"] == "start"
+    rx = [r for r in records if r["kind"] == "zvel_rx"]
+    tx = [r for r in records if r["kind"] == "samples_tx"]
+    assert [r["stream_seq"] for r in rx] == [1, 2, 2]
+    assert all(r["current"] for r in rx)
+    assert rx[0]["rx_board_us"] <= rx[1]["rx_board_us"] <= rx[2]["rx_board_us"]
+    # Board time of the receipt is near the firmware's clock (within a few wakes).
+    assert all(abs(r["rx_board_us"] - r["fw_t_us"]) < 50_000 for r in rx)
+    # Every batch the host saw was logged as sent, with its last sample's time.
+    sent = {(r["stream_seq"], r["t0_us"]): r for r in tx}
+    assert seen
+    for m in seen:
+        r = sent[(m.stream_seq, m.t0_us)]
+        assert r["t_last_us"] == m.t0_us + m.period_us * (len(m.samples_cv) - 1)
+        assert r["samples"] == len(m.samples_cv) == 5
+        assert abs(r["tx_board_us"] - r["t_last_us"]) < 50_000
+    tx_times = [r["tx_board_us"] for r in tx]
+    assert tx_times == sorted(tx_times)
+    assert [r["stream_seq"] for r in tx] == list(range(len(tx)))  # from the first batch on
