@@ -122,6 +122,7 @@ def test_latency_suite_short_run_as_a_module() -> None:
     lag = e2e["mock_send_lag_us"]
     assert -5_000 < lag["p50"] <= lag["p99"] < 50_000
     assert lag["p99"] <= lag["max"]
+    assert 0 <= lag["early"] <= lag["count"]
     assert report["goals"]["e2e_p99_us"]["value"] == net["p99"]
     assert 0 < pty["cpu_percent"] < 100
     assert pty["rss_mb"] > 10
