@@ -165,9 +165,16 @@ class MockBoardProcess:
         fw_t0_us = self.board.firmware.t_us
         if self.latency is not None:
             self.latency.start(t0, fw_t0_us, self.board.firmware.boot_id)
+        anchored = self.board.firmware
         try:
             while not self.stop.is_set():
                 fw = self.board.firmware
+                if fw is not anchored:
+                    # Rebooted: the new firmware's clock starts at 0 now. Without a new
+                    # anchor it would run every tick since the process started, at once,
+                    # fast-forwarding the plant (and the gantry) by that much.
+                    anchored = fw
+                    t0, fw_t0_us = loop.time(), fw.t_us
                 due_us = fw_t0_us + round((loop.time() - t0) * 1e6)
                 ticks = 0
                 while fw.t_us < due_us and ticks < MAX_TICKS_PER_WAKE:

@@ -189,3 +189,34 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
     tx_times = [r["tx_board_us"] for r in tx]
     assert tx_times == sorted(tx_times)
     assert [r["stream_seq"] for r in tx] == list(range(len(tx)))  # from the first batch on
+
+
+def test_after_a_reboot_board_time_restarts_and_runs_at_real_time(tmp_path: Path) -> None:
+    """SIGUSR2 reboots the board: its clock starts again at 0 and keeps pace with the wall
+    clock; it does not run the ticks since the process started at once (which would move
+    the plant and the gantry ahead by that much)."""
+    proc = _start(tmp_path / "dthc0")
+    try:
+        time.sleep(2.0)
+        proc.send_signal(signal.SIGUSR2)
+        rebooted = time.monotonic()
+        time.sleep(0.2)
+        with serial.Serial(str(tmp_path / "dthc0"), timeout=0.05, exclusive=True) as port:
+            hello = fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5)
+            assert isinstance(_exchange(port, hello, fp.HelloInfo), fp.HelloInfo)
+            decoder = fp.StreamDecoder()
+            batches: list[fp.Samples] = []
+            while len(batches) < 20:
+                batches += [m for m in decoder.feed(port.read(512)) if isinstance(m, fp.Samples)]
+            since_reboot_us = (time.monotonic() - rebooted) * 1e6
+        assert batches[-1].t0_us <= since_reboot_us + 100_000
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(5)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+            for stream in (proc.stdout, proc.stderr):
+                if stream is not None:
+                    stream.close()
