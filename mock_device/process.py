@@ -177,7 +177,9 @@ class MockBoardProcess:
                     t0, fw_t0_us = loop.time(), fw.t_us
                 due_us = fw_t0_us + round((loop.time() - t0) * 1e6)
                 ticks = 0
-                while fw.t_us < due_us and ticks < MAX_TICKS_PER_WAKE:
+                # A tick's sample is taken at the tick's end: run it once its time has come,
+                # or its batch leaves before the board time it carries.
+                while fw.t_us + fw.sampling.period_us <= due_us and ticks < MAX_TICKS_PER_WAKE:
                     fw.tick()
                     ticks += 1
                     fw = self.board.firmware

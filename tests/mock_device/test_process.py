@@ -186,6 +186,9 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
         assert r["t_last_us"] == m.t0_us + m.period_us * (len(m.samples_cv) - 1)
         assert r["samples"] == len(m.samples_cv) == 5
         assert abs(r["tx_board_us"] - r["t_last_us"]) < 50_000
+    # No batch leaves before its last sample's board time (a tick runs once it is due).
+    early = [r for r in tx if r["tx_board_us"] < r["t_last_us"]]
+    assert early == []
     tx_times = [r["tx_board_us"] for r in tx]
     assert tx_times == sorted(tx_times)
     assert [r["stream_seq"] for r in tx] == list(range(len(tx)))  # from the first batch on
