@@ -22,9 +22,10 @@ not the firmware's burst-ticked ``t_us``. The host's records (which batch each Z
 answered, its stream seq) are matched to those receipts by seq and nearest board time
 (``match_board_e2e``). ``board_e2e_us`` = receipt - last sample. It includes the mock's
 own send lag, ``mock_send_lag_us`` = the link write of the batch - its last sample: a
-real MCU sends a batch when it is complete; the mock sends at its next wake, and since
-a wake runs every tick that has begun, its last tick may run up to one period *before*
-its board time (a negative lag). ``board_e2e_net_of_mock_lag_us`` = receipt - the batch's
+real MCU sends a batch when it is complete; the mock runs a tick once its sample time has
+come and sends at that wake, later by its wake-up delay (``early`` counts batches written
+before their board time: 0 since the mock stopped running ticks that had only begun).
+``board_e2e_net_of_mock_lag_us`` = receipt - the batch's
 write is what a board that sends at once would see; the e2e goal (p99 <= 1 ms) is judged
 on it. On Linux the host's ``perf_counter`` and the mock's loop clock are both
 CLOCK_MONOTONIC, so ``net_legs_us`` splits it: mock write -> host read, host read ->
@@ -419,9 +420,9 @@ def board_e2e_block(m: BoardE2e, log_ok: bool) -> dict[str, object]:
             **_dist(m.send_lag_us),
             "early": sum(lag < 0 for lag in m.send_lag_us),
             "note": (
-                "the mock sends at its next wake; a wake runs every tick that has begun, so"
-                " its last batch can leave up to one period before its board time (early),"
-                " which makes board_e2e_us read low; the net figure does not depend on it"
+                "the mock writes a batch at the wake that runs its last tick, late by its"
+                " wake-up delay, which a board sending at once does not have; early counts"
+                " batches written before their board time (expected 0)"
             ),
         },
         "board_e2e_net_of_mock_lag_us": _dist(m.net_us),
