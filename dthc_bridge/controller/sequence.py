@@ -689,6 +689,8 @@ class CutSequence:
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = self.thc_enabled
         self.thc.anti_dive_percent = self.params.anti_dive_percent
+        # Following a slow-down may take the torch down by half the cut height at most.
+        self.thc.slow_follow_max_down_mm = self.params.cut_height_mm / 2.0
         self._last_thc_t = None
         self._reply(True)  # M3 answered: XY motion may start
 

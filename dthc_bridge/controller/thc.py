@@ -16,9 +16,11 @@ about the open controllers (plasma-facts.md):
   Z while the XY speed changes. Once the speed has held steady below the lock threshold
   and the voltage rise of the slower cut has settled (two consecutive windows of the
   filtered voltage agree), the voltage measured then (never below the cut target: slowing
-  down only raises it) becomes a temporary target, and the loop follows the plate again
-  within ``slow_follow_max_mm`` of where it started. A change of speed or a stale speed
-  drops back to the plain lock, a void pauses it; at speed again, the cut target applies.
+  down only raises it) becomes a temporary target, and the loop follows the plate again,
+  with its Z travel while following summed over the cut and bounded: ``slow_follow_max_mm``
+  each way, and down no more than half the cut height (set by the sequence). A change of
+  speed or a stale speed drops back to the plain lock, a void pauses it; at speed again,
+  the cut target applies.
 - **Kerf and void dive**: the slope of the filtered voltage locks the THC above
   ``void_slope_v_s`` and holds the lock for a quiet period after the spike.
 - **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
@@ -72,7 +74,7 @@ class ThcConfig:
     slow_min_percent: float = 20.0  # slower than this (a stop, a creep) stays locked
     slow_max_rise_v: float = 15.0  # a larger rise is no slow-down: stay locked
     slow_error_average_s: float = 0.1  # time constant of the full-speed error carried over
-    slow_follow_max_mm: float = 1.5  # Z travel allowed while following a slow-down
+    slow_follow_max_mm: float = 1.5  # Z travel while following slow-downs, each way, per cut
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -108,7 +110,7 @@ class _State:
     # far off the torch already was when the slow-down began.
     at_speed_error_v: float = 0.0
     full_speed_integral_mm_s: float = 0.0  # the integral to restore at speed
-    slow_travel_mm: float = 0.0
+    slow_travel_mm: float = 0.0  # Z travel while following, summed over the cut
 
 
 class ThcController:
@@ -119,6 +121,9 @@ class ThcController:
         self.frozen = True
         self.max_speed_mm_s = self.config.max_speed_mm_s
         self.anti_dive_percent = self.config.anti_dive_lock_percent
+        # Downward Z travel allowed while following slow-downs, over a whole cut: the
+        # sequence sets half the cut height (lower is a dive); None: slow_follow_max_mm.
+        self.slow_follow_max_down_mm: float | None = None
         self._s = _State()
 
     def reset(self) -> None:
@@ -249,9 +254,15 @@ class ThcController:
         limit = self.max_speed_mm_s
         command = max(-limit, min(limit, command))
         if s.slow_target_v is not None:
-            # Following a slow-down on a measured target: bounded travel, braking in time
-            # to stop at the bound.
-            room = cfg.slow_follow_max_mm - s.slow_travel_mm * math.copysign(1.0, command)
+            # Following a slow-down on a measured target: bounded travel over the cut,
+            # braking in time to stop at the bound.
+            if command > 0.0:
+                room = cfg.slow_follow_max_mm - s.slow_travel_mm
+            else:
+                down = cfg.slow_follow_max_mm
+                if self.slow_follow_max_down_mm is not None:
+                    down = min(down, self.slow_follow_max_down_mm)
+                room = down + s.slow_travel_mm
             room = max(0.0, room)
             # The speed that still stops within ``room``: v·dt + v²/2a = room.
             a = cfg.max_accel_mm_s2
@@ -325,4 +336,3 @@ class ThcController:
         s.full_speed_integral_mm_s = s.integral_mm_s
         # The integral is the Z speed that followed the plate at full feed: scale it.
         s.integral_mm_s *= s.speed_ratio
-        s.slow_travel_mm = 0.0

@@ -307,3 +307,16 @@ def test_mode_2_follows_the_external_boxs_up_down_outputs() -> None:
     assert cut.dives == 0
     assert cut.height_rms_error_mm < 0.3
     assert any(v != 0.0 for v in loop.velocities)
+
+
+@pytest.mark.parametrize("cut_height_mm", [1.5, 3.5])
+def test_each_cut_limits_slow_down_following_to_half_the_cut_height_down(
+    cut_height_mm: float,
+) -> None:
+    """Below half the cut height is a dive: that is as far down as following a slow-down
+    may take the torch in one cut."""
+    loop = ready(cut_height_mm=cut_height_mm)
+    started = loop.m3()
+    assert started.ok
+    assert loop.seq.thc.slow_follow_max_down_mm == pytest.approx(cut_height_mm / 2)
+    assert loop.m5().ok

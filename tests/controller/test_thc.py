@@ -236,6 +236,65 @@ def test_z_travel_while_following_a_slow_down_is_bounded() -> None:
     assert out[-1] == 0.0
 
 
+def test_the_travel_bound_holds_over_several_slow_downs_of_one_cut() -> None:
+    """Each steady slow-down takes a new target, but the Z travel while following is
+    summed over the cut: two slow-downs at a rising voltage move Z down no further than
+    one bound."""
+    thc = running(slow_follow_max_mm=0.5)
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    t, first = slow_down(thc, 135.0, 1.0, t)
+    t, _ = slow_down(thc, 124.0, 0.3, t, speed=40.0)  # a new, slower steady speed
+    assert thc.slow_target_v is not None
+    t, second = slow_down(thc, 134.0, 1.0, t, speed=40.0)
+    travel = sum(v * 0.005 for v in first + second)
+    assert -0.5 - 0.02 <= travel < -0.45
+    assert second[-1] == 0.0
+
+
+def test_following_goes_down_no_further_than_the_down_limit() -> None:
+    """The sequence limits the way down to half the cut height; up keeps the full bound."""
+    thc = running(slow_follow_max_mm=1.5)
+    thc.slow_follow_max_down_mm = 0.3
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    t, down = slow_down(thc, 135.0, 1.0, t)
+    assert -0.3 - 0.02 <= sum(v * 0.005 for v in down) < -0.27
+    _, up = slow_down(thc, 115.0, 1.0, t)
+    assert sum(v * 0.005 for v in up) > 1.0  # back up through the start, on to +1.5 mm
+
+
+@pytest.mark.parametrize("how", ["frozen", "disabled", "speed_stale", "reset"])
+def test_following_ends_at_once_when_the_thc_may_not_move(how: str) -> None:
+    """Arc-lost delay (frozen), M666, a stale XY speed or a new cut while Z is moving on a
+    slow-down target: the target is dropped and Z ramps to a stop."""
+    thc = running()
+    t, _ = slow_down(thc, 125.0, 0.3, 0.0)
+    moving = 0.0
+    for i in range(1, 41):  # the voltage creeps up 20 V/s (no void): Z goes down after it
+        t += 0.005
+        moving = step(thc, 125.0 + 0.1 * i, t, speed=50.0)
+    assert thc.slow_target_v is not None
+    assert moving < -1.0
+    if how == "frozen":
+        thc.frozen = True
+    elif how == "disabled":
+        thc.enabled = False
+    elif how == "reset":
+        thc.reset()
+        assert thc.target_v is None
+    velocities: list[float] = []  # from the first step without a slow-down target
+    for _ in range(30):
+        t += 0.005
+        if how != "speed_stale":
+            thc.observe_speed(50.0, 100.0, t)
+        velocity = thc.update([129.0] * 5, PERIOD, t, 0.005).velocity_mm_s
+        if thc.slow_target_v is None:
+            velocities.append(velocity)
+    assert len(velocities) >= 15  # a stale speed counts after speed_stale_s (0.05 s)
+    assert thc.locks(t)
+    assert velocities[-1] == 0.0
+    assert all(abs(b) <= abs(a) for a, b in itertools.pairwise(velocities))
+
+
 def test_slow_follow_off_holds_z_through_the_whole_slow_down() -> None:
     thc = running(slow_follow=False)
     t, out = slow_down(thc, 125.0, 1.0, 0.0)
