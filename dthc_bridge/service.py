@@ -25,11 +25,11 @@ from .controller import actions as act
 from .controller.commands import Command, CommandError
 from .controller.gcode import parse_line, parse_request
 from .controller.plasma import PlasmaController
-from .controller.sequence import with_board_limits
+from .controller.sequence import CutSequence, with_board_limits
 from .link import LinkError, LinkState, LinkSupervisor
 from .mqtt.port import CommandResult
 
-__all__ = ["ControllerService"]
+__all__ = ["ControllerService", "feed_samples"]
 
 log = structlog.get_logger("dthc_bridge.service")
 
@@ -279,11 +279,7 @@ class ControllerService:
         seq = self.seq
         now = self.now
         if isinstance(item, fp.Samples):
-            z_mm = item.z_um / 1000
-            seq.on_inputs(item.inputs, z_mm, now)
-            xy = item.xy_speed_dmm_s / 10 if item.has_xy_speed else None
-            volts = [cv / 100 for cv in item.samples_cv]
-            seq.on_samples(volts, item.period_us / 1e6, z_mm, xy, self._requested_feed_mm_s, now)
+            z_mm, xy = feed_samples(seq, item, self._requested_feed_mm_s, now)
             # Only what the batch brought is kept here; telemetry() builds the point at the
             # MQTT rate, not at the sample rate.
             self._last_batch = (now, z_mm, xy)
@@ -342,6 +338,18 @@ class ControllerService:
         with contextlib.suppress(LinkError, asyncio.TimeoutError):
             self._send_velocity(0.0)
             await asyncio.wait_for(self.client.torch(False), 0.5)
+
+
+def feed_samples(
+    seq: CutSequence, batch: fp.Samples, requested_feed_mm_s: float | None, now: float
+) -> tuple[float, float | None]:
+    """One SAMPLES batch into the cut sequence, in its units; returns (Z mm, XY mm/s)."""
+    z_mm = batch.z_um / 1000
+    seq.on_inputs(batch.inputs, z_mm, now)
+    xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else None
+    volts = [cv / 100 for cv in batch.samples_cv]
+    seq.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, now)
+    return z_mm, xy
 
 
 def _fault_names(faults: int) -> str:

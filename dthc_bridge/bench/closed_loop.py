@@ -14,6 +14,7 @@ import firmware_protocol as fp
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State, with_board_limits
 from dthc_bridge.controller.thc import ThcConfig, ThcController
+from dthc_bridge.service import feed_samples
 from mock_device.sim import SimulatedBoard
 from mock_device.sim_host import SimHost
 
@@ -23,11 +24,7 @@ SENSORS_FLOAT = 1 << fp.InputBit.FLOAT
 
 @dataclass
 class Trace:
-    t_s: list[float] = field(default_factory=list)
-    height_mm: list[float] = field(default_factory=list)
-    state: list[str] = field(default_factory=list)
-    voltage_v: list[float] = field(default_factory=list)
-    velocity_mm_s: list[float] = field(default_factory=list)
+    state: list[str] = field(default_factory=list)  # the sequence state after each step
 
 
 class ClosedLoop:
@@ -125,14 +122,10 @@ class ClosedLoop:
         seq = self.seq
         now = self.now
         if isinstance(m, fp.Samples):
-            z = m.z_um / 1000
-            seq.on_inputs(m.inputs, z, now)
-            xy = m.xy_speed_dmm_s / 10 if m.has_xy_speed else None
             requested = (
                 self.requested_override_mm_s or self.plant.gantry.requested_feed_mm_s or None
             )
-            volts = [cv / 100 for cv in m.samples_cv]
-            seq.on_samples(volts, m.period_us / 1e6, z, xy, requested, now)
+            feed_samples(seq, m, requested, now)
         elif isinstance(m, fp.Event):
             seq.on_inputs(m.inputs, m.z_um / 1000, now)
         elif isinstance(m, fp.MotionDone):
@@ -149,12 +142,7 @@ class ClosedLoop:
         self.execute(seq.drain())
 
     def _record(self) -> None:
-        t = self.trace
-        t.t_s.append(self.now)
-        t.height_mm.append(self.plant.true_height_mm)
-        t.state.append(str(self.seq.state))
-        t.voltage_v.append(self.seq.thc.filtered_v or 0.0)
-        t.velocity_mm_s.append(self.velocities[-1] if self.velocities else 0.0)
+        self.trace.state.append(str(self.seq.state))
 
     def run_until(self, done: object, max_s: float) -> bool:
         assert callable(done)

@@ -19,19 +19,21 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
 
+from firmware_protocol.constants import InputBit
+
 from . import actions as act
 from .commands import CutParams, ThcMode
 from .thc import Lock, ThcController
 
 __all__ = ["CutSequence", "SequenceConfig", "State"]
 
-ARC_OK = 1 << 0
-OHMIC = 1 << 1
-FLOAT = 1 << 2
-BREAKAWAY = 1 << 3
-THC_UP = 1 << 4
-THC_DOWN = 1 << 5
-ESTOP = 1 << 6
+ARC_OK = 1 << InputBit.ARC_OK
+OHMIC = 1 << InputBit.OHMIC
+FLOAT = 1 << InputBit.FLOAT
+BREAKAWAY = 1 << InputBit.BREAKAWAY
+THC_UP = 1 << InputBit.THC_UP
+THC_DOWN = 1 << InputBit.THC_DOWN
+ESTOP = 1 << InputBit.ESTOP
 
 
 class State(StrEnum):
@@ -501,9 +503,8 @@ class CutSequence:
         cfg = self.config
         now = self.now
         locks = self.thc.locks(now)
+        # Anti-dive off (G200 A0): locks() never holds VELOCITY or NO_SPEED.
         at_speed = Lock.VELOCITY not in locks and Lock.NO_SPEED not in locks
-        if self.params.anti_dive_percent == 0:
-            at_speed = True
         if not at_speed:
             cut.at_speed_since = None
         elif cut.at_speed_since is None:
@@ -544,7 +545,7 @@ class CutSequence:
     def _updown_velocity(self) -> float:
         if not self.thc_enabled or self.thc.frozen:
             return 0.0
-        locks = self.thc.locks(self.now) - {Lock.FROZEN}
+        locks = self.thc.locks(self.now)
         if Lock.VELOCITY in locks or Lock.NO_SPEED in locks:
             return 0.0
         speed = self.config.thc_updown_speed_mm_s
