@@ -162,27 +162,13 @@ class MockBoardProcess:
         self._log("ready", link=str(getattr(self.link, "path", "")), boot_id=self.boot_hex)
         print(ready, flush=True)
         t0 = loop.time()
-        fw_t0_us = self.board.firmware.t_us
+        self.board.tick_due(t0)  # anchors board time to the loop clock (a reboot re-anchors)
         if self.latency is not None:
-            self.latency.start(t0, fw_t0_us, self.board.firmware.boot_id)
-        anchored = self.board.firmware
+            fw = self.board.firmware
+            self.latency.start(t0, fw.t_us, fw.boot_id)
         try:
             while not self.stop.is_set():
-                fw = self.board.firmware
-                if fw is not anchored:
-                    # Rebooted: the new firmware's clock starts at 0 now. Without a new
-                    # anchor it would run every tick since the process started, at once,
-                    # fast-forwarding the plant (and the gantry) by that much.
-                    anchored = fw
-                    t0, fw_t0_us = loop.time(), fw.t_us
-                due_us = fw_t0_us + round((loop.time() - t0) * 1e6)
-                ticks = 0
-                # A tick's sample is taken at the tick's end: run it once its time has come,
-                # or its batch leaves before the board time it carries.
-                while fw.t_us + fw.sampling.period_us <= due_us and ticks < MAX_TICKS_PER_WAKE:
-                    fw.tick()
-                    ticks += 1
-                    fw = self.board.firmware
+                self.board.tick_due(loop.time(), MAX_TICKS_PER_WAKE)
                 self._flush()
                 self._scheduled_faults()
                 if (
@@ -190,8 +176,8 @@ class MockBoardProcess:
                     and self.board.t_s >= self.options.duration_s
                 ):
                     break
-                batch_us = fw.sampling.period_us * fw.sampling.batch_size
-                wake = t0 + (fw.t_us + batch_us - fw_t0_us) / 1e6
+                fw = self.board.firmware
+                wake = self.board.due_at_s(fw.t_us + fw.sampling.period_us * fw.sampling.batch_size)
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self.stop.wait(), max(0.0, wake - loop.time()))
         finally:

@@ -38,6 +38,9 @@ class SimulatedBoard:
         self.firmware = firmware_class(
             self.plant, self._board_write, rng=self.rng, identity=identity
         )
+        # Real-time pacing (tick_due): the firmware it was anchored on, the real clock and
+        # board time at the anchor. A reboot's new firmware is anchored again.
+        self._anchor: tuple[BoardFirmware, float, int] | None = None
 
     def _board_write(self, frame: bytes) -> None:
         self._out += self.faults.outgoing(frame)
@@ -54,6 +57,30 @@ class SimulatedBoard:
         data = bytes(self._out)
         self._out.clear()
         return data
+
+    def tick_due(self, now_s: float, max_ticks: int | None = None) -> int:
+        """Run every tick whose sample time has come by ``now_s`` on a real clock (at most
+        ``max_ticks``); return how many ran. The first call, and the first after a reboot
+        (whose firmware clock starts again at 0), anchor board time to ``now_s``."""
+        fw = self.firmware
+        if self._anchor is None or self._anchor[0] is not fw:
+            self._anchor = (fw, now_s, fw.t_us)
+        _, t0_s, fw_t0_us = self._anchor
+        due_us = fw_t0_us + round((now_s - t0_s) * 1e6)
+        period_us = fw.sampling.period_us
+        ticks = 0
+        # A tick's sample is taken at the tick's end: run it once its time has come, or
+        # its batch leaves before the board time it carries.
+        while fw.t_us + period_us <= due_us and (max_ticks is None or ticks < max_ticks):
+            fw.tick()
+            ticks += 1
+        return ticks
+
+    def due_at_s(self, board_us: int) -> float:
+        """The real-clock time at which board time ``board_us`` is due (after tick_due)."""
+        assert self._anchor is not None
+        _, t0_s, fw_t0_us = self._anchor
+        return t0_s + (board_us - fw_t0_us) / 1e6
 
     def advance_ms(self, ms: float) -> None:
         period_us = self.firmware.sampling.period_us

@@ -685,12 +685,8 @@ class SimLink(Transport):
         self._ticking = False
 
     async def _run(self) -> None:
-        firmware = self.board.firmware
-        t0, fw_t0 = self._loop.time(), firmware.t_us
         while self._ticking:
-            due_us = fw_t0 + round((self._loop.time() - t0) * 1e6)
-            while firmware.t_us < due_us:
-                firmware.tick()
+            self.board.tick_due(self._loop.time())
             self._deliver()
             await asyncio.sleep(0.001)
 

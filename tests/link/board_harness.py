@@ -65,15 +65,8 @@ class RealtimeSimBoard:
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
-        firmware = self.board.firmware
-        t0, fw_t0 = loop.time(), firmware.t_us
         while True:
-            if self.board.firmware is not firmware:  # rebooted: its clock starts again
-                firmware = self.board.firmware
-                t0, fw_t0 = loop.time(), firmware.t_us
-            due_us = fw_t0 + round((loop.time() - t0) * 1e6)
-            while firmware.t_us < due_us:
-                firmware.tick()
+            self.board.tick_due(loop.time())  # a reboot's new clock is anchored again
             self.flush()
             await asyncio.sleep(0.002)
 
