@@ -32,13 +32,6 @@ __all__ = ["run_daemon"]
 
 log = structlog.get_logger("dthc_bridge.daemon")
 
-_FILTERS = {
-    "none": fp.FilterKind.NONE,
-    "moving_average": fp.FilterKind.MOVING_AVERAGE,
-    "low_pass": fp.FilterKind.LOW_PASS,
-    "median3": fp.FilterKind.MEDIAN3,
-}
-
 
 def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
     """The board link and the controller service, wired as the configuration says."""
@@ -54,7 +47,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         await client.configure(
             sample_rate_hz=board.sample_rate_hz,
             batch_size=board.batch_size,
-            filter_kind=_FILTERS[board.filter],
+            filter_kind=fp.FilterKind[board.filter.upper()],
             filter_param=board.filter_param,
             arc_lost_ms=board.arc_lost_ms,
             cal_offset=board.cal_offset,

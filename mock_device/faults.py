@@ -29,10 +29,6 @@ class FaultPlan:
     stall_acks_at_s: float | None = None  # stop answering commands for stall_for_s
     stall_for_s: float = 0.5
 
-    @property
-    def corrupts_bytes(self) -> bool:
-        return bool(self.bit_flip_rate or self.drop_frame_rate or self.garbage_rate)
-
 
 class LinkFaultInjector:
     def __init__(self, plan: FaultPlan, rng: random.Random) -> None:

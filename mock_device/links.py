@@ -48,10 +48,6 @@ class PtyLink(BoardLink):
     def is_open(self) -> bool:
         return self._master is not None
 
-    @property
-    def device(self) -> str | None:
-        return None if self._slave is None else os.ttyname(self._slave)
-
     async def open(self) -> None:
         master, slave = os.openpty()
         # Raw mode on both sides: no echo, no line discipline, 8-bit clean, like a USB port.

@@ -468,10 +468,10 @@ def _ours_config(spec: str | None) -> ThcConfig | None:
         key = key.strip()
         if key not in known:
             raise SystemExit(f"--ours: unknown ThcConfig field {key!r}; known: {sorted(known)}")
-        kind = types[key]
-        if kind in (bool, "bool"):
+        kind = types[key]  # a string: thc.py has postponed annotations
+        if kind == "bool":
             values[key] = value.strip().lower() in ("1", "true", "yes", "on")
-        elif kind in (int, "int"):
+        elif kind == "int":
             values[key] = int(value)
         else:
             values[key] = float(value)

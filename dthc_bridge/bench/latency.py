@@ -57,7 +57,6 @@ import argparse
 import asyncio
 import contextlib
 import math
-import os
 import random
 import resource
 import signal
@@ -83,7 +82,7 @@ from mock_device.latency_log import read_latency_log
 from mock_device.plant import load_scenario
 from mock_device.sim import SimulatedBoard
 
-from .report import Goal, goals_block, percentiles
+from .report import Goal, goals_block, percentiles, proc_cpu_s
 
 __all__ = [
     "BoardE2e",
@@ -252,14 +251,6 @@ def rectangle_program(duration_s: float) -> list[str]:
             "G1 X100 Y100",
         ]
     return lines
-
-
-def _proc_cpu_s(pid: int) -> float | None:
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text(encoding="ascii").rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _status_kb(key: str) -> int | None:
@@ -571,7 +562,7 @@ async def _measure_pty_link(
 
         stats = rig.supervisor.stats
         gaps0, reads0 = stats.telemetry_gaps, reads[0]
-        mock_cpu0 = _proc_cpu_s(mock_pid)
+        mock_cpu0 = proc_cpu_s(mock_pid)
         usage0 = resource.getrusage(resource.RUSAGE_SELF)
         wall0 = time.perf_counter()
         client.recording = True
@@ -583,7 +574,7 @@ async def _measure_pty_link(
             await prober
         wall = time.perf_counter() - wall0
         usage1 = resource.getrusage(resource.RUSAGE_SELF)
-        mock_cpu1 = _proc_cpu_s(mock_pid)
+        mock_cpu1 = proc_cpu_s(mock_pid)
         rss_kb, hwm_kb = _status_kb("VmRSS"), _status_kb("VmHWM")
         state = str(rig.seq.state)
         with contextlib.suppress(Exception):

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import os
 import tempfile
 import time
 import uuid
@@ -19,7 +18,7 @@ from pathlib import Path
 import aiomqtt
 
 from ..demo import Stack, StackOptions, program_lines
-from .report import Goal, goals_block
+from .report import Goal, goals_block, proc_cpu_s
 
 __all__ = ["add_arguments", "run"]
 
@@ -31,10 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--program", default="holes_corners")
 
 
-def _cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    ticks = os.sysconf("SC_CLK_TCK")
-    return (int(fields[11]) + int(fields[12])) / ticks  # utime + stime
+def _daemon_cpu_s(pid: int) -> float:
+    cpu = proc_cpu_s(pid)
+    if cpu is None:
+        raise RuntimeError(f"daemon process {pid} is gone")
+    return cpu
 
 
 async def _count_messages(port: int, counter: list[int]) -> None:
@@ -62,11 +62,11 @@ async def _scale(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
         counter = [0]
         observer = asyncio.create_task(_count_messages(first.broker.port, counter))
         await asyncio.sleep(0.5)
-        cpu0 = [_cpu_s(t.daemon.pid) for t in tables if t.daemon is not None]
+        cpu0 = [_daemon_cpu_s(t.daemon.pid) for t in tables if t.daemon is not None]
         t0, messages0 = time.monotonic(), counter[0]
         reports = await asyncio.gather(*(t.send(lines) for t in tables))
         elapsed = time.monotonic() - t0
-        cpu1 = [_cpu_s(t.daemon.pid) for t in tables if t.daemon is not None]
+        cpu1 = [_daemon_cpu_s(t.daemon.pid) for t in tables if t.daemon is not None]
         messages = counter[0] - messages0
         observer.cancel()
         with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):

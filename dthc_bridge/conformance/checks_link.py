@@ -339,11 +339,10 @@ async def check_duplicate_seq(ctx: SuiteContext) -> list[CheckResult]:
     return [passed("duplicate_seq", figure, values=values)]
 
 
-def _frame(body: bytes, *, corrupt_crc: bool = False) -> bytes:
-    """A frame with an arbitrary body, its CRC optionally wrong."""
+def _bad_crc_frame(body: bytes) -> bytes:
+    """A frame with ``body`` and a wrong CRC (fp.encode_frame makes the right one)."""
     frame = bytearray(body + struct.pack(">H", fp.crc16(body)))
-    if corrupt_crc:
-        frame[-1] ^= 0x5A
+    frame[-1] ^= 0x5A
     return bytes(cobs_encode(bytes(frame))) + b"\x00"
 
 
@@ -355,7 +354,7 @@ async def check_corrupt_frames(ctx: SuiteContext) -> list[CheckResult]:
     mark = link.mark()
     # 1. OHMIC_SENSE on with a wrong CRC: no reply, not executed.
     bad_crc_seq = link.next_seq()
-    link.write(_frame(bytes((fp.MsgType.OHMIC_SENSE, bad_crc_seq, 1)), corrupt_crc=True))
+    link.write(_bad_crc_frame(bytes((fp.MsgType.OHMIC_SENSE, bad_crc_seq, 1))))
     # 2. Invalid COBS (a code byte pointing past the frame end) and 3. a 2-byte frame.
     link.write(b"\x05\x01\x02\x00")
     link.write(b"\x02\x01\x00")  # decodes to one byte: shorter than any frame
@@ -364,9 +363,11 @@ async def check_corrupt_frames(ctx: SuiteContext) -> list[CheckResult]:
     link.write(bytes(rng.randrange(1, 256) for _ in range(GARBAGE_BYTES)) + b"\x00")
     # 5. Valid CRC, unknown type; 6. valid CRC, TORCH with a 2-byte payload (saying "off").
     unknown = fp.Heartbeat(link.next_seq())
-    unknown_reply = await _nak_for(ctx, _frame(bytes((0x7E, unknown.seq))), unknown)
+    unknown_reply = await _nak_for(ctx, fp.encode_frame(bytes((0x7E, unknown.seq))), unknown)
     torch = fp.Torch(link.next_seq(), False)
-    torch_reply = await _nak_for(ctx, _frame(bytes((fp.MsgType.TORCH, torch.seq, 0, 0))), torch)
+    torch_reply = await _nak_for(
+        ctx, fp.encode_frame(bytes((fp.MsgType.TORCH, torch.seq, 0, 0))), torch
+    )
     after = await ctx.status()  # in sync: a valid query right after is answered
     crc_delta = (after.rx_crc_errors - before.rx_crc_errors) & 0xFFFF
     framing_delta = (after.rx_framing_errors - before.rx_framing_errors) & 0xFFFF

@@ -52,7 +52,6 @@ class PlasmaController:
     def __init__(self, sequence: CutSequence | None = None) -> None:
         self.seq = sequence or CutSequence()
         self.resume_points: list[ResumeTrack] = []
-        self.current_a: float | None = None
 
     @property
     def last_resume_point(self) -> ResumeTrack | None:
@@ -89,7 +88,6 @@ class PlasmaController:
             self.resume_points.append(ResumeTrack(command.line, len(self.resume_points)))
             return Outcome(data={"resume_line": command.line, "index": len(self.resume_points) - 1})
         elif isinstance(command, SetCurrent):
-            self.current_a = command.current_a
             seq.request_current(command.current_a)
         elif isinstance(command, VoltageMode):
             volts = None if command.auto else command.volts

@@ -136,7 +136,7 @@ class WriteFile:
                     path.chmod(self.mode)
             else:
                 ctx.report("unchanged", self.target)
-            self._chown(ctx, path)
+            _chown_group(ctx, path, self.group)
             return
         ctx.changed.add(self.target)
         ctx.report("write", f"{self.target} ({self.mode:04o})")
@@ -150,11 +150,6 @@ class WriteFile:
         if gid is not None:
             os.chown(partial, 0, gid)
         partial.replace(path)
-
-    def _chown(self, ctx: Context, path: Path) -> None:
-        gid = ctx.group_id(self.group)
-        if gid is not None and path.stat().st_gid != gid:
-            os.chown(path, 0, gid)
 
 
 @dataclass(frozen=True)
@@ -174,9 +169,7 @@ class MakeDir:
             if not ctx.dry_run:
                 path.mkdir(parents=True, exist_ok=True)
                 path.chmod(self.mode)
-        gid = ctx.group_id(self.group)
-        if gid is not None and path.stat().st_gid != gid:
-            os.chown(path, 0, gid)
+        _chown_group(ctx, path, self.group)
 
 
 @dataclass(frozen=True)
@@ -261,14 +254,14 @@ class StartService:
 
     def apply(self, ctx: Context) -> None:
         verb = "restart" if ctx.changed.intersection(self.restart_if_changed) else "start"
-        argv = ("systemctl", verb, self.unit)
-        reason = _skip_reason(ctx, "systemd")
-        if reason is not None:
-            ctx.report("skip", f"{shlex.join(argv)} ({reason})")
-            return
-        ctx.report("run", shlex.join(argv))
-        if not ctx.dry_run:
-            ctx.runner(argv)
+        Command(("systemctl", verb, self.unit), "systemd").apply(ctx)
+
+
+def _chown_group(ctx: Context, path: Path, group: str | None) -> None:
+    """root:``group`` on a live install, when it is not already."""
+    gid = ctx.group_id(group)
+    if gid is not None and path.stat().st_gid != gid:
+        os.chown(path, 0, gid)
 
 
 def _skip_reason(ctx: Context, needs: Needs) -> str | None:

@@ -118,11 +118,6 @@ class Arc:
         self._ok_bounce_end_t = math.inf
         self._ok_switched = True
 
-    @property
-    def voltage_present(self) -> bool:
-        """True when the cutter drives a voltage (pilot, transferred, or lost with torch on)."""
-        return self.state in _LIVE_STATES
-
     def set_current_a(self, current_a: float) -> None:
         """Cutter current set point; shifts the voltage by ``current_v_per_a`` per amp."""
         self.current_a = current_a

@@ -241,10 +241,6 @@ class Plant:
         """Count a safety violation seen by the board firmware (e.g. ``VIOLATION_LEASE``)."""
         self.truth.count_violation(kind)
 
-    def input_flags(self) -> InputBit:
-        """``inputs()`` as an ``InputBit`` flag (for logs and tests)."""
-        return InputBit(self.inputs())
-
     @property
     def torch_on(self) -> bool:
         """The torch relay as last set by the board."""
@@ -279,8 +275,3 @@ class Plant:
     def xy_speed_mm_s(self) -> float:
         """Actual XY path speed."""
         return self.gantry.speed_mm_s
-
-    @property
-    def requested_feed_mm_s(self) -> float:
-        """Programmed feed of the move being run (0 when idle)."""
-        return self.gantry.requested_feed_mm_s
