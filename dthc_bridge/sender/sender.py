@@ -17,7 +17,14 @@ from typing import Any
 
 import structlog
 
-from ..controller.commands import CommandError, ResumePoint, VelocityReduction
+from ..controller.commands import (
+    Command,
+    CommandError,
+    ProbeAndStart,
+    ResumePoint,
+    TorchStart,
+    VelocityReduction,
+)
 from ..controller.gcode import parse_line
 from .backend import BackendError, MotionBackend
 from .daemon_client import DaemonClient, DaemonError
@@ -119,8 +126,8 @@ class Sender:
                     report.resume_points.append(number)
                 if isinstance(command, VelocityReduction):
                     self.velocity_percent = command.percent if command.percent > 0 else 100.0
-            if "M3" in line.upper().replace("M03", "M3") or "G100 P6" in line.upper():
-                report.cuts_started += 1
+                if starts_cut(command):
+                    report.cuts_started += 1
             return
         motion = parsed.motion
         if not motion or _MODAL_ONLY.match(motion):
@@ -149,3 +156,10 @@ class Sender:
             return idle.result()
         idle.cancel()
         return (float("nan"), float("nan"))
+
+
+def starts_cut(command: Command) -> bool:
+    """M3, or RosettaCNC G100 P6 in a mode that starts the torch (I0/I1; I2/I3 set values)."""
+    return isinstance(command, TorchStart) or (
+        isinstance(command, ProbeAndStart) and command.mode in (0, 1)
+    )
