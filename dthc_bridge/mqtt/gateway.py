@@ -43,7 +43,7 @@ from .payloads import (
 )
 from .port import CommandResult, ControllerPort
 from .settings import MqttSettings
-from .topics import REQUEST_NAME, topic_error, topic_matches
+from .topics import REQUEST_NAME, topic_error
 
 __all__ = ["GatewayStats", "MqttGateway"]
 
@@ -278,7 +278,7 @@ class MqttGateway:
             self._on_request(name, message)
             return
         will = self.settings.sender_will_topic
-        if will is not None and topic_matches(will, topic):
+        if will is not None and message.topic.matches(will):
             self._on_sender_will(message)
             return
         log.debug("mqtt_unexpected_message", topic=topic)

@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal, Self
 
+import aiomqtt
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
 
-from .topics import Topics, filter_error, topic_matches
+from .topics import Topics, filter_error
 
 __all__ = ["MqttSettings", "MqttTls"]
 
@@ -89,7 +90,7 @@ class MqttSettings(BaseModel):
             raise ValueError("max_pending_requests must be >= max_concurrent_requests")
         if self.sender_will_topic is not None:
             for own in self.topics.samples():
-                if topic_matches(self.sender_will_topic, own):
+                if aiomqtt.Topic(own).matches(self.sender_will_topic):
                     raise ValueError(
                         f"sender_will_topic {self.sender_will_topic!r} overlaps the "
                         f"gateway's own topic {own!r}"

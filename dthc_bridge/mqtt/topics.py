@@ -10,7 +10,6 @@ __all__ = [
     "Topics",
     "filter_error",
     "topic_error",
-    "topic_matches",
 ]
 
 REQUEST_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
@@ -109,17 +108,3 @@ def filter_error(topic_filter: str) -> str | None:
         if "+" in level and level != "+":
             return "'+' must be a whole level"
     return None
-
-
-def topic_matches(topic_filter: str, topic: str) -> bool:
-    """MQTT filter matching (``+`` one level, ``#`` the rest); ``$`` topics not special-cased."""
-    pattern = topic_filter.split("/")
-    levels = topic.split("/")
-    for index, part in enumerate(pattern):
-        if part == "#":
-            return True
-        if index >= len(levels):
-            return False
-        if part not in ("+", levels[index]):
-            return False
-    return len(pattern) == len(levels)
