@@ -37,9 +37,14 @@ def mock(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
     pty = tmp_path / "dthc0"
     proc = _start(pty, "--unplug-for", "0.5")
     yield proc, pty
+    _stop(proc)
+
+
+def _stop(proc: subprocess.Popen[str]) -> int:
+    """SIGTERM, wait up to 5 s (then kill); the exit status."""
     proc.send_signal(signal.SIGTERM)
     try:
-        proc.wait(5)
+        return proc.wait(5)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -152,6 +157,7 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
     pty = tmp_path / "dthc0"
     proc = _start(pty, "--latency-log", str(log))
     seen: list[fp.Samples] = []
+    status = None
     try:
         with serial.Serial(str(pty), timeout=0.02) as port:
             _exchange(port, fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5), fp.HelloInfo)
@@ -161,14 +167,9 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
                 deadline = time.monotonic() + 0.05
                 while time.monotonic() < deadline:
                     seen += [m for m in decoder.feed(port.read(256)) if isinstance(m, fp.Samples)]
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(5) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        for stream in (proc.stdout, proc.stderr):
-            if stream is not None:
-                stream.close()
+        status = _stop(proc)
+    assert status == 0
     records = [json.loads(line) for line in log.read_text().splitlines()]
     assert records[0]["kind"] == "start"
     rx = [r for r in records if r["kind"] == "zvel_rx"]
@@ -194,32 +195,23 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
     assert [r["stream_seq"] for r in tx] == list(range(len(tx)))  # from the first batch on
 
 
-def test_after_a_reboot_board_time_restarts_and_runs_at_real_time(tmp_path: Path) -> None:
+def test_after_a_reboot_board_time_restarts_and_runs_at_real_time(
+    mock: tuple[subprocess.Popen[str], Path],
+) -> None:
     """SIGUSR2 reboots the board: its clock starts again at 0 and keeps pace with the wall
     clock; it does not run the ticks since the process started at once (which would move
     the plant and the gantry ahead by that much)."""
-    proc = _start(tmp_path / "dthc0")
-    try:
-        time.sleep(2.0)
-        proc.send_signal(signal.SIGUSR2)
-        rebooted = time.monotonic()
-        time.sleep(0.2)
-        with serial.Serial(str(tmp_path / "dthc0"), timeout=0.05, exclusive=True) as port:
-            hello = fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5)
-            assert isinstance(_exchange(port, hello, fp.HelloInfo), fp.HelloInfo)
-            decoder = fp.StreamDecoder()
-            batches: list[fp.Samples] = []
-            while len(batches) < 20:
-                batches += [m for m in decoder.feed(port.read(512)) if isinstance(m, fp.Samples)]
-            since_reboot_us = (time.monotonic() - rebooted) * 1e6
-        assert batches[-1].t0_us <= since_reboot_us + 100_000
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(5)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-            for stream in (proc.stdout, proc.stderr):
-                if stream is not None:
-                    stream.close()
+    proc, pty = mock
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGUSR2)
+    rebooted = time.monotonic()
+    time.sleep(0.2)
+    with serial.Serial(str(pty), timeout=0.05, exclusive=True) as port:
+        hello = fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 5)
+        assert isinstance(_exchange(port, hello, fp.HelloInfo), fp.HelloInfo)
+        decoder = fp.StreamDecoder()
+        batches: list[fp.Samples] = []
+        while len(batches) < 20:
+            batches += [m for m in decoder.feed(port.read(512)) if isinstance(m, fp.Samples)]
+        since_reboot_us = (time.monotonic() - rebooted) * 1e6
+    assert batches[-1].t0_us <= since_reboot_us + 100_000
