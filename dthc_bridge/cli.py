@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib
+import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 from . import conformance
@@ -17,7 +21,9 @@ from .deploy.install import (
 )
 from .logs import configure_logging
 
-__all__ = ["main"]
+__all__ = ["TOOL_COMMANDS", "main", "missing_for_extra", "run_tool"]
+
+DISTRIBUTION = "dthc-bridge"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,25 +36,6 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, help="TOML configuration file")
     check = sub.add_parser("check-config", help="validate a configuration file")
     check.add_argument("file", type=Path)
-    demo = sub.add_parser("demo", help="run everything end to end on embedded defaults")
-    demo.add_argument("--json", action="store_true", help="print one JSON object")
-    demo.add_argument(
-        "--program",
-        default="masso_sample",
-        choices=["masso_sample", "rosetta_g100", "holes_corners"],
-    )
-    demo.add_argument("--plot", type=Path, help="PNG to write (default out/demo.png)")
-    demo.add_argument("--broker", default="auto", choices=["auto", "mosquitto", "amqtt"])
-    send = sub.add_parser("send", help="send a G-code program to the daemon (reference sender)")
-    send.add_argument("program", type=Path)
-    send.add_argument("--broker", default="mqtt://localhost:1883", help="mqtt://HOST:PORT")
-    send.add_argument("--base-topic", default="dthc")
-    send.add_argument("--board-id", default="table1")
-    send.add_argument("--protocol", default="5", choices=["5", "3.1.1"])
-    send.add_argument("--backend", default="sim", choices=["sim"])
-    send.add_argument("--gantry", default="socket://127.0.0.1:7001", help="sim backend port")
-    send.add_argument("--start-line", type=int, default=1, help="e.g. a G100 P0 resume point")
-    send.add_argument("--json", action="store_true")
     conf = sub.add_parser(
         "conformance", help="check that a board honours the protocol and its safety rules"
     )
@@ -59,10 +46,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_uninstall_arguments(
         sub.add_parser("uninstall-service", help="remove the service (--purge: config and user)")
     )
-    bench = sub.add_parser(
-        "bench", help="benchmark suites: codec, latency, control, soak, scale (--json)"
-    )
-    bench.add_argument("args", nargs=argparse.REMAINDER, help="SUITE [--json] [options]")
+    for name, tool in TOOL_COMMANDS.items():
+        tool_parser = sub.add_parser(
+            name, help=f"{tool.help} (extra '{tool.extra}')", add_help=False
+        )
+        tool_parser.add_argument("args", nargs=argparse.REMAINDER, help="the tool's own arguments")
     return parser
 
 
@@ -91,41 +79,88 @@ def _check(path: Path) -> int:
     return 0
 
 
-def _host_port(url: str, scheme: str) -> tuple[str, int]:
-    rest = url.removeprefix(scheme)
-    host, _, port = rest.rpartition(":")
-    if rest == url or not host or not port.isdigit():
-        raise SystemExit(f"expected {scheme}HOST:PORT, got {url!r}")
-    return host, int(port)
+@dataclass(frozen=True)
+class ToolCommand:
+    """A command of a tool package: found by module name, so the runtime imports no tool."""
+
+    module: str  # has main(argv, prog=...) -> int
+    extra: str  # the extra that installs what it needs
+    help: str
 
 
-async def _send(args: argparse.Namespace) -> int:
-    import json  # noqa: PLC0415
+TOOL_COMMANDS = {
+    "demo": ToolCommand(
+        "dthc_tools.demo.cli", "demo", "run everything end to end on embedded defaults"
+    ),
+    "send": ToolCommand(
+        "dthc_tools.sender.cli", "sender", "send a G-code program to the daemon (reference sender)"
+    ),
+    "bench": ToolCommand(
+        "dthc_tools.bench.cli", "bench", "benchmark suites: codec, latency, control, soak, scale"
+    ),
+}
+_REQUIREMENT = re.compile(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)(?:\[([^\]]*)\])?")
+_EXTRA_MARKER = re.compile(r"""extra\s*==\s*["']([^"']+)["']""")
 
-    from .sender import DaemonClient, Sender, SimGantryBackend  # noqa: PLC0415
 
-    host, port = _host_port(args.broker, "mqtt://")
-    gantry_host, gantry_port = _host_port(args.gantry, "socket://")
-    lines = args.program.read_text().splitlines()
-    daemon = DaemonClient(
-        host, port, base_topic=args.base_topic, board_id=args.board_id, protocol=args.protocol
-    )
-    backend = SimGantryBackend(gantry_host, gantry_port)
-    async with daemon.connected():
-        report = await Sender(daemon, backend).run(lines, start_line=args.start_line)
-    await backend.close()
-    if args.json:
-        print(json.dumps(report.as_dict()))
-    elif report.ok:
-        print(f"done: {report.lines_sent} lines, {report.cuts_started} cuts")
-    else:
-        where = f"; resume from line {report.resume_from}" if report.resume_from else ""
-        print(f"stopped at line {report.error_line}: {report.error}{where}")
-    return 0 if report.ok else 1
+def missing_for_extra(extra: str, distribution: str = DISTRIBUTION) -> list[str]:
+    """The distributions ``extra`` needs that are not installed, read from the package's
+    own metadata (pyproject.toml is the one list), following extras of extras."""
+    try:
+        requirements = metadata.requires(distribution) or []
+    except metadata.PackageNotFoundError:
+        return []  # run from a source tree without metadata: the import will tell
+    missing: list[str] = []
+    for requirement in requirements:
+        marker = _EXTRA_MARKER.search(requirement)
+        head = _REQUIREMENT.match(requirement)
+        if marker is None or marker.group(1) != extra or head is None:
+            continue
+        name, nested = head.group(1), head.group(2)
+        if name.replace("_", "-").lower() == distribution:
+            for inner in (nested or "").split(","):
+                if inner.strip():
+                    missing += missing_for_extra(inner.strip(), distribution)
+            continue
+        try:
+            metadata.version(name)
+        except metadata.PackageNotFoundError:
+            missing.append(name)
+    return missing
+
+
+def run_tool(name: str, argv: Sequence[str]) -> int:
+    """Run a tool command, or say which extra installs it (exit 2)."""
+    tool = TOOL_COMMANDS[name]
+    missing = missing_for_extra(tool.extra)
+    if not missing:
+        try:
+            module = importlib.import_module(tool.module)
+        except ModuleNotFoundError as exc:
+            if exc.name is None or exc.name.split(".")[0] == "dthc_tools":
+                raise
+            missing = [exc.name]
+    if missing:
+        print(
+            f"dthc-bridge {name}: needs the '{tool.extra}' extra (missing: {', '.join(missing)});"
+            f" install it with: pip install 'dthc-bridge[{tool.extra}]'",
+            file=sys.stderr,
+        )
+        return 2
+    tool_main: Callable[..., int] = module.main
+    return tool_main(list(argv), prog=f"dthc-bridge {name}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    # A tool's arguments are the tool's: hand everything after its name over untouched.
+    head, _, rest = _split_at_tool(argv)
+    if rest is not None:
+        args = parser.parse_args(head)
+        configure_logging(args.log_level or "warning")
+        return run_tool(args.command, rest)
+    args = parser.parse_args(argv)
     if args.command == "run":
         return _run(args.config, args.log_level)
     configure_logging(args.log_level or "warning")
@@ -137,17 +172,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_uninstall(args)
     if args.command == "conformance":
         return conformance.run_from_args(args)
-    if args.command == "demo":
-        from .demo import run_demo  # noqa: PLC0415 - the demo pulls in subprocess machinery
-
-        return run_demo(as_json=args.json, program=args.program, plot=args.plot, broker=args.broker)
-    if args.command == "send":
-        return asyncio.run(_send(args))
-    if args.command == "bench":
-        from .bench.cli import main as bench_main  # noqa: PLC0415 - only the bench needs it
-
-        return bench_main(args.args)
     return 2
+
+
+def _split_at_tool(argv: list[str]) -> tuple[list[str], str, list[str] | None]:
+    """``[--log-level L] TOOL ARGS...`` -> (global part with TOOL, TOOL, ARGS)."""
+    index = 0
+    while index < len(argv) and argv[index].startswith("-"):
+        index += 1 if "=" in argv[index] or argv[index] in ("-h", "--help") else 2
+    if index < len(argv) and argv[index] in TOOL_COMMANDS:
+        return argv[: index + 1], argv[index], argv[index + 1 :]
+    return argv, "", None
 
 
 if __name__ == "__main__":

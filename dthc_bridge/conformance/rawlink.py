@@ -20,7 +20,7 @@ import structlog
 import firmware_protocol as fp
 
 from ..link import LinkDown, RequestTimeout
-from ..transport import Transport, TransportError, open_transport
+from ..transport import Transport, TransportError, TransportOpener, open_transport
 
 __all__ = ["REPLY_TYPES", "RawBoardLink", "Received"]
 
@@ -50,8 +50,16 @@ class RawBoardLink:
     """Frames in and out of one board, every sequence number and every byte chosen by the
     caller. Open with ``async with``; it owns its transport and its keep-alive task."""
 
-    def __init__(self, url: str, *, ack_timeout_s: float, baudrate: int = 921_600) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        ack_timeout_s: float,
+        baudrate: int = 921_600,
+        opener: TransportOpener | None = None,
+    ) -> None:
         self.url = url
+        self._opener = opener
         self.ack_timeout_s = ack_timeout_s
         self._baudrate = baudrate
         self._loop = asyncio.get_running_loop()
@@ -88,7 +96,12 @@ class RawBoardLink:
             if generation == self._generation:
                 self._on_lost(exc)
 
-        self._transport = await open_transport(self.url, on_bytes, on_lost, baudrate=self._baudrate)
+        if self._opener is not None:
+            self._transport = await self._opener(on_bytes, on_lost)
+        else:
+            self._transport = await open_transport(
+                self.url, on_bytes, on_lost, baudrate=self._baudrate
+            )
         self._lost = None
         self.write(b"\x00")  # ends any partial frame the board holds
 

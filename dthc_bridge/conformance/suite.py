@@ -21,7 +21,7 @@ import structlog
 import firmware_protocol as fp
 
 from ..link import LinkError, RequestTimeout
-from ..transport import TransportError
+from ..transport import TransportError, TransportOpener
 from .checks_link import (
     capability_names,
     check_boot_id_reset,
@@ -97,9 +97,11 @@ async def run_suite(
     *,
     operator: Operator | None = None,
     on_result: ResultCallback | None = None,
+    opener: TransportOpener | None = None,
 ) -> SuiteReport:
-    """Run the whole suite against the board at ``options.link``; never raises for a board
-    fault, a lost link or a missing device: those are failed checks in the report."""
+    """Run the whole suite against the board at ``options.link`` (reached through
+    ``opener`` where one is given); never raises for a board fault, a lost link or a
+    missing device: those are failed checks in the report."""
     loop = asyncio.get_running_loop()
     started_s = loop.time()
     report = SuiteReport(options.link)
@@ -116,8 +118,9 @@ async def run_suite(
                 record(skipped(name, f"not run: {reason}", hint=hint))
 
     link = RawBoardLink(
-        options.link, ack_timeout_s=options.ack_timeout_s, baudrate=options.baudrate
-    )
+        options.link, ack_timeout_s=options.ack_timeout_s, baudrate=options.baudrate,
+        opener=opener,
+    )  # fmt: skip
     ctx = SuiteContext(link, options, operator)
     try:
         await link.open()

@@ -18,7 +18,7 @@ import structlog
 
 import firmware_protocol as fp
 
-from ..transport import Transport, TransportError
+from ..transport import Transport, TransportError, TransportOpener
 from .clock import BoardClock
 from .errors import (
     BoardRebooted,
@@ -31,15 +31,12 @@ from .errors import (
 from .stats import LinkStats
 from .timing import LinkTiming
 
-__all__ = ["BoardSession", "ReportCallback", "SamplesCallback", "TransportOpener"]
+__all__ = ["BoardSession", "ReportCallback", "SamplesCallback"]
 
 log = structlog.get_logger("dthc_bridge.link")
 
 SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of sample 0
 ReportCallback = Callable[[fp.Message], None]  # EVENT, FAULT, MOTION_DONE, PROBE_RESULT
-TransportOpener = Callable[
-    [Callable[[bytes], None], Callable[[Exception | None], None]], Awaitable[Transport]
-]
 
 _REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
 _REPORT_REPLY = {fp.QueryWhat.PROBE_RESULT: fp.ProbeResult, fp.QueryWhat.MOTION_DONE: fp.MotionDone}

@@ -15,9 +15,9 @@ from enum import StrEnum
 
 import structlog
 
-from ..transport import TransportError, open_transport
+from ..transport import TransportError, TransportOpener, open_transport
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
-from .session import BoardSession, ReportCallback, SamplesCallback, TransportOpener
+from .session import BoardSession, ReportCallback, SamplesCallback
 from .stats import LinkStats
 from .timing import LinkTiming
 

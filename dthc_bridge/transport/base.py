@@ -9,9 +9,9 @@ through ``on_lost`` (with the exception, or None for a close we asked for). Libr
 from __future__ import annotations
 
 import abc
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 
-__all__ = ["BytesCallback", "LostCallback", "Transport", "TransportError"]
+__all__ = ["BytesCallback", "LostCallback", "Transport", "TransportError", "TransportOpener"]
 
 BytesCallback = Callable[[bytes], None]
 LostCallback = Callable[[Exception | None], None]
@@ -55,3 +55,8 @@ class Transport(abc.ABC):
 
     def discard_output(self) -> None:  # noqa: B027 - optional hook, a no-op by default
         """Drop bytes queued but not yet sent (before a retransmission), where possible."""
+
+
+TransportOpener = Callable[[BytesCallback, LostCallback], Awaitable[Transport]]
+"""Opens one connection given the receiver's callbacks: :func:`open_transport` bound to a
+URL in production; tests and the simulation hand the link layer their own."""

@@ -3,7 +3,7 @@
 ``/dev/ttyACM0``, ``/dev/serial/by-id/...`` or any other filesystem path (a pty symlink)
 is a serial port; ``socket://host:port`` is TCP; ``usb://VID:PID`` or
 ``usb://VID:PID/SERIAL`` (hex ids) is a vendor-specific bulk interface reached through
-pyusb; ``memory://NAME`` is an in-process endpoint registered by tests.
+pyusb. There is no test-only kind: tests inject an opener into the link layer instead.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import urllib.parse
 from dataclasses import dataclass, field
 from typing import Literal
 
-__all__ = ["LinkUrl", "MemoryUrl", "SerialUrl", "TcpUrl", "UsbUrl", "parse_link_url"]
+__all__ = ["LinkUrl", "SerialUrl", "TcpUrl", "UsbUrl", "parse_link_url"]
 
 _SCHEME_RE = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://")
 _USB_ID_RE = re.compile(r"[0-9A-Fa-f]{1,4}")
@@ -47,15 +47,7 @@ class UsbUrl:
     kind: Literal["usb"] = field(default="usb", init=False)
 
 
-@dataclass(frozen=True, slots=True)
-class MemoryUrl:
-    """An in-process endpoint registered with ``register_memory_endpoint(name, ...)``."""
-
-    name: str
-    kind: Literal["memory"] = field(default="memory", init=False)
-
-
-LinkUrl = SerialUrl | TcpUrl | UsbUrl | MemoryUrl
+LinkUrl = SerialUrl | TcpUrl | UsbUrl
 
 
 def parse_link_url(url: str) -> LinkUrl:
@@ -79,13 +71,9 @@ def parse_link_url(url: str) -> LinkUrl:
         return _parse_tcp(url)
     if scheme == "usb":
         return _parse_usb(url, rest)
-    if scheme == "memory":
-        if not rest:
-            raise ValueError(f"link URL {url!r}: memory:// needs a name")
-        return MemoryUrl(name=rest)
     raise ValueError(
         f"link URL {url!r}: unsupported scheme {scheme!r} "
-        "(use a device path, socket://host:port, usb://VID:PID[/SERIAL] or memory://NAME)"
+        "(use a device path, socket://host:port, or usb://VID:PID[/SERIAL])"
     )
 
 

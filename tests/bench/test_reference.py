@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from dthc_bridge.bench.control import plan_cuts, run_controller
-from dthc_bridge.bench.reference import ReferenceConfig, ReferenceThc
 from dthc_bridge.controller.thc import Lock
+from dthc_tools.bench.control import plan_cuts, run_controller
+from dthc_tools.bench.reference import ReferenceConfig, ReferenceThc
 from mock_device.plant import load_scenario
 
 PERIOD = 0.001

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from dthc_bridge.bench import scale, soak
+from dthc_tools.bench import scale, soak
 
 pytestmark = pytest.mark.slow
 

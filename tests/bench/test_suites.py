@@ -9,15 +9,15 @@ import sys
 
 import pytest
 
-from dthc_bridge.bench import cli
-from dthc_bridge.bench.control import plan_cuts
-from dthc_bridge.bench.latency import (
+from dthc_tools.bench import cli
+from dthc_tools.bench.control import plan_cuts
+from dthc_tools.bench.latency import (
     board_bound,
     log_records,
     match_board_e2e,
     rectangle_program,
 )
-from dthc_bridge.bench.report import Goal, percentiles
+from dthc_tools.bench.report import Goal, percentiles
 
 HEADER = {"suite", "command", "python", "machine", "goals", "pass"}
 
@@ -94,9 +94,9 @@ def test_text_output_is_a_table(capsys: pytest.CaptureFixture[str]) -> None:
 
 @pytest.mark.slow
 def test_latency_suite_short_run_as_a_module() -> None:
-    """``python -m dthc_bridge.bench latency --json --duration 2``: mock on a pty and in-process."""
+    """``python -m dthc_tools.bench latency --json --duration 2``: mock on a pty and in-process."""
     done = subprocess.run(
-        [sys.executable, "-m", "dthc_bridge.bench", "latency", "--json", "--duration", "2"],
+        [sys.executable, "-m", "dthc_tools.bench", "latency", "--json", "--duration", "2"],
         capture_output=True, text=True, timeout=55, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr

@@ -1,4 +1,4 @@
-"""The suite in-process, against a simulated board ticking in real time behind memory://.
+"""The suite in-process, against a simulated board ticking in real time behind an injected opener.
 
 Covers what the mock process cannot show: a board without ohmic sensing (the duplicate
 check falls back to Z moves, the probe to the float switch, the lease check to the fault
@@ -16,7 +16,6 @@ from dthc_bridge.conformance.checks_motion import audit_input_events
 from dthc_bridge.conformance.context import InputRecord
 from dthc_bridge.conformance.errors import OutsideWindow
 from dthc_bridge.conformance.window import MotionWindow
-from dthc_bridge.transport.memory import memory_endpoint
 from mock_device.firmware import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from tests.link.board_harness import RealtimeSimBoard
@@ -32,11 +31,10 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
     not move Z again), probes by the float switch and times the lease fault; all pass,
     the reset is skipped (no way to reset), and nothing moved outside the window."""
     sim = RealtimeSimBoard(SimulatedBoard("flat_clean", 11, identity=NO_OHMIC))
-    options = ConformanceOptions(link="memory://conf-no-ohmic", start_z_mm=25.0, feed_mm_s=50.0,
+    options = ConformanceOptions(link="sim://conf-no-ohmic", start_z_mm=25.0, feed_mm_s=50.0,
                                  rtt_limit_ms=100.0, telemetry_s=1.0, rtt_queries=50)  # fmt: skip
     async with sim.running():
-        with memory_endpoint("conf-no-ohmic", sim.opener):
-            report = await run_suite(options)
+        report = await run_suite(options, opener=sim.opener)
     checks = {c.name: c for c in report.checks}
     assert list(checks) == list(CHECK_NAMES)
     verdicts = {name: c.passed for name, c in checks.items()}
@@ -53,10 +51,10 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
 async def test_unopenable_link_fails_the_handshake_and_skips_the_rest() -> None:
     """A link that cannot be opened is one failed check naming the link; the rest are
     skipped, and the exit status says failure."""
-    report = await run_suite(ConformanceOptions(link="memory://nobody-here"))
+    report = await run_suite(ConformanceOptions(link="/nonexistent/dthc-nobody-here"))
     assert report.checks[0].name == "handshake"
     assert report.checks[0].passed is False
-    assert "memory://nobody-here" in report.checks[0].figure
+    assert "/nonexistent/dthc-nobody-here" in report.checks[0].figure
     assert [c.passed for c in report.checks[1:]] == [None] * (len(CHECK_NAMES) - 1)
     assert report.exit_status == 1
 

@@ -6,14 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from dthc_bridge.bench.closed_loop import ClosedLoop
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.commands import CommandError
 from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.controller.sequence import State
+from dthc_tools.sim.closed_loop import ClosedLoop
 
-PROGRAMS = Path(__file__).parents[2] / "dthc_bridge" / "programs"
+PROGRAMS = Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs"
 
 
 class Sender:

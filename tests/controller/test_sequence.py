@@ -6,10 +6,10 @@ from dataclasses import replace
 
 import pytest
 
-from dthc_bridge.bench.closed_loop import ClosedLoop
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import SequenceConfig, State
+from dthc_tools.sim.closed_loop import ClosedLoop
 from mock_device.plant import load_scenario
 
 SQUARE = ("G1 X250 Y50 F5500", "G1 X250 Y150", "G1 X50 Y150", "G1 X50 Y50")

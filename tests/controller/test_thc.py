@@ -8,9 +8,9 @@ from typing import Any
 
 import pytest
 
-from dthc_bridge.bench.closed_loop import ClosedLoop
-from dthc_bridge.bench.control import plan_cuts, run_controller
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
+from dthc_tools.bench.control import plan_cuts, run_controller
+from dthc_tools.sim.closed_loop import ClosedLoop
 from mock_device.plant import load_scenario
 
 from .test_sequence import ready

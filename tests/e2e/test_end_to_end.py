@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from dthc_bridge.demo import Stack, StackOptions, program_lines
-from dthc_bridge.demo.summary import summarize
+from dthc_tools.demo import Stack, StackOptions, program_lines
+from dthc_tools.demo.summary import summarize
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 

@@ -12,8 +12,8 @@ from collections.abc import AsyncIterator
 
 from dthc_bridge.transport import Transport, TransportError
 from dthc_bridge.transport.base import BytesCallback, LostCallback
-from dthc_bridge.transport.memory import LinkFaults, MemoryTransport, memory_pair
 from mock_device.sim import SimulatedBoard
+from tests.transport.memory import LinkFaults, MemoryTransport, memory_pair
 
 
 class RealtimeSimBoard:

@@ -17,9 +17,9 @@ from dthc_bridge.link import (
     LinkTiming,
     NegativeAck,
 )
-from dthc_bridge.transport.memory import LinkFaults
 from mock_device.firmware import BoardIdentity
 from mock_device.sim import SimulatedBoard
+from tests.transport.memory import LinkFaults
 
 from .board_harness import RealtimeSimBoard
 

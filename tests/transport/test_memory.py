@@ -1,4 +1,4 @@
-"""In-memory transport pairs, clean and hostile, and the ``memory://`` registry."""
+"""In-memory transport pairs (a test fixture), clean and hostile."""
 
 from __future__ import annotations
 
@@ -7,22 +7,12 @@ import asyncio
 import pytest
 
 from dthc_bridge.transport import (
-    BytesCallback,
-    LostCallback,
-    Transport,
     TransportError,
     open_transport,
 )
-from dthc_bridge.transport.memory import (
-    LinkFaults,
-    MemoryTransport,
-    memory_endpoint,
-    memory_pair,
-    register_memory_endpoint,
-    unregister_memory_endpoint,
-)
 
 from .helpers import Recorder, settle
+from .memory import LinkFaults, MemoryTransport, memory_pair
 
 PAYLOAD = bytes(range(256)) * 4
 
@@ -193,57 +183,8 @@ async def test_invalid_fault_rates_are_rejected() -> None:
         LinkFaults(delay_s=-1)
 
 
-async def test_memory_url_opens_a_registered_endpoint() -> None:
-    """open_transport('memory://NAME') hands the daemon's callbacks to the registered factory."""
-    board = Recorder()
-    board_ends: list[MemoryTransport] = []
-
-    def factory(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
-        daemon_end, board_end = memory_pair(
-            on_bytes,
-            on_lost,
-            board.on_bytes,
-            board.on_lost,
-            url_a="memory://board",
-        )
-        board_ends.append(board_end)
-        return daemon_end
-
-    daemon = Recorder()
-    with memory_endpoint("board", factory) as url:
-        transport = await open_transport(url, daemon.on_bytes, daemon.on_lost)
-        assert transport.url == "memory://board"
-        transport.write(b"hello board")
-        board_ends[0].write(b"hello daemon")
-        assert await board.wait_for_bytes(11) == b"hello board"
-        assert await daemon.wait_for_bytes(12) == b"hello daemon"
-        await transport.close()
-    assert daemon.lost == [None]
-    with pytest.raises(TransportError, match="no memory endpoint 'board'"):
-        await open_transport(url, daemon.on_bytes, daemon.on_lost)
-
-
-async def test_async_factories_and_duplicate_names() -> None:
-    """A factory may be async; registering a taken name fails unless replace=True."""
-
-    async def factory(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
-        await asyncio.sleep(0)
-        daemon_end, _ = memory_pair(
-            on_bytes,
-            on_lost,
-            lambda _: None,
-            lambda _: None,
-        )
-        return daemon_end
-
-    register_memory_endpoint("dup", factory)
-    try:
-        with pytest.raises(ValueError, match="already registered"):
-            register_memory_endpoint("dup", factory)
-        register_memory_endpoint("dup", factory, replace=True)
-        rec = Recorder()
-        transport = await open_transport("memory://dup", rec.on_bytes, rec.on_lost)
-        assert transport.is_open
-        await transport.close()
-    finally:
-        unregister_memory_endpoint("dup")
+async def test_the_product_has_no_memory_link_kind() -> None:
+    """``memory://`` is refused by the production URL parser: tests inject an opener."""
+    rec = Recorder()
+    with pytest.raises(ValueError, match="unsupported scheme 'memory'"):
+        await open_transport("memory://board", rec.on_bytes, rec.on_lost)

@@ -8,7 +8,6 @@ import pytest
 
 from dthc_bridge.transport import (
     LinkUrl,
-    MemoryUrl,
     SerialUrl,
     TcpUrl,
     UsbUrl,
@@ -35,11 +34,10 @@ from .helpers import Recorder
         ("usb://1209:d7c0", UsbUrl(0x1209, 0xD7C0)),
         ("usb://1209:D7C0/ABC123", UsbUrl(0x1209, 0xD7C0, "ABC123")),
         ("usb://1:2", UsbUrl(1, 2)),
-        ("memory://board", MemoryUrl("board")),
     ],
 )
 def test_every_link_form_parses_to_its_kind_and_parts(url: str, expected: LinkUrl) -> None:
-    """Device paths, by-id and pty symlinks are serial; socket://, usb:// and memory:// split."""
+    """Device paths, by-id and pty symlinks are serial; socket:// and usb:// split."""
     parsed = parse_link_url(url)
     assert parsed == expected
     assert parsed.kind == expected.kind
@@ -47,9 +45,11 @@ def test_every_link_form_parses_to_its_kind_and_parts(url: str, expected: LinkUr
 
 def test_link_kinds_are_named() -> None:
     """Each parsed form says which kind of link it is, for logs and config checks."""
-    assert [
-        parse_link_url(u).kind for u in ("/dev/ttyACM0", "socket://h:1", "usb://1:2", "memory://m")
-    ] == ["serial", "tcp", "usb", "memory"]
+    assert [parse_link_url(u).kind for u in ("/dev/ttyACM0", "socket://h:1", "usb://1:2")] == [
+        "serial",
+        "tcp",
+        "usb",
+    ]
 
 
 @pytest.mark.parametrize(
@@ -71,7 +71,7 @@ def test_link_kinds_are_named() -> None:
         ("socket://host:70000", "bad TCP port"),
         ("socket://:5000", "needs a host"),
         ("socket://host:5000/path", "only host:port"),
-        ("memory://", "needs a name"),
+        ("memory://board", "unsupported scheme 'memory'"),
         ("rfc2217://host:5000", "unsupported scheme 'rfc2217'"),
         ("http://host", "unsupported scheme 'http'"),
     ],

@@ -17,7 +17,7 @@ from typing import Any
 
 import structlog
 
-from ..controller.commands import (
+from dthc_bridge.controller.commands import (
     Command,
     CommandError,
     ProbeAndStart,
@@ -25,13 +25,14 @@ from ..controller.commands import (
     TorchStart,
     VelocityReduction,
 )
-from ..controller.gcode import parse_line
+from dthc_bridge.controller.gcode import parse_line
+
 from .backend import BackendError, MotionBackend
 from .daemon_client import DaemonClient, DaemonError
 
 __all__ = ["SendReport", "Sender"]
 
-log = structlog.get_logger("dthc_bridge.sender")
+log = structlog.get_logger("dthc_tools.sender")
 
 _HAS_FEED = re.compile(r"(?i)\bF\s*[0-9.]")
 _FEED_WORD = re.compile(r"(?i)\bF\s*([0-9]*\.?[0-9]+)")

@@ -37,10 +37,10 @@ from typing import Any
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
+from dthc_tools.sim.closed_loop import ClosedLoop
 from mock_device.plant import list_scenarios, load_scenario
 from mock_device.plant.truth import CutStats
 
-from .closed_loop import ClosedLoop
 from .reference import ReferenceConfig, ReferenceThc
 from .report import Goal, goals_block
 

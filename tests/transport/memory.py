@@ -6,36 +6,24 @@ dropped at random, bits flipped at random, bytes delivered one at a time, delive
 Randomness is seeded, so a failing run repeats. Every delivery goes through the event loop
 (``call_soon`` / ``call_later``), never from inside ``write``, and keeps the write order.
 
-``memory://NAME`` URLs reach an endpoint registered with :func:`register_memory_endpoint`:
-the factory gets the daemon side's callbacks and returns the daemon side's transport,
-usually the first half of a :func:`memory_pair` whose other half plays the board.
+There is no ``memory://`` link kind in the product: a test hands the link layer an opener
+(``TransportOpener``) that returns the daemon's half of a pair.
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import inspect
 import random
 from collections import deque
-from collections.abc import Awaitable, Callable, Iterator
 from dataclasses import dataclass
 
-from .base import BytesCallback, LostCallback, Transport, TransportError
+from dthc_bridge.transport.base import BytesCallback, LostCallback, Transport, TransportError
 
 __all__ = [
     "LinkFaults",
-    "MemoryEndpointFactory",
     "MemoryTransport",
-    "memory_endpoint",
     "memory_pair",
-    "open_memory",
-    "register_memory_endpoint",
-    "unregister_memory_endpoint",
 ]
-
-MemoryEndpointFactory = Callable[[BytesCallback, LostCallback], Transport | Awaitable[Transport]]
-"""Builds the daemon side of a ``memory://`` link from the daemon's callbacks."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,46 +182,3 @@ def memory_pair(
     a._peer = b
     b._peer = a
     return a, b
-
-
-_endpoints: dict[str, MemoryEndpointFactory] = {}
-
-
-def register_memory_endpoint(
-    name: str, factory: MemoryEndpointFactory, *, replace: bool = False
-) -> None:
-    """Make ``memory://name`` open through ``factory(on_bytes, on_lost)``."""
-    if not name:
-        raise ValueError("memory endpoint name must not be empty")
-    if name in _endpoints and not replace:
-        raise ValueError(f"memory endpoint {name!r} is already registered")
-    _endpoints[name] = factory
-
-
-def unregister_memory_endpoint(name: str) -> None:
-    """Forget ``memory://name``; no error if it was not registered."""
-    _endpoints.pop(name, None)
-
-
-@contextlib.contextmanager
-def memory_endpoint(name: str, factory: MemoryEndpointFactory) -> Iterator[str]:
-    """Register ``factory`` under ``name`` for the block; yields the ``memory://`` URL."""
-    register_memory_endpoint(name, factory)
-    try:
-        yield f"memory://{name}"
-    finally:
-        unregister_memory_endpoint(name)
-
-
-async def open_memory(
-    url: str, name: str, on_bytes: BytesCallback, on_lost: LostCallback
-) -> Transport:
-    """Open ``memory://name``; TransportError if nothing is registered under that name."""
-    factory = _endpoints.get(name)
-    if factory is None:
-        raise TransportError(url, f"no memory endpoint {name!r} registered")
-    made = factory(on_bytes, on_lost)
-    transport = await made if inspect.isawaitable(made) else made
-    if not isinstance(transport, Transport):
-        raise TypeError(f"memory endpoint {name!r} factory returned {transport!r}")
-    return transport

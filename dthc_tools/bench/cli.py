@@ -7,7 +7,7 @@ adds what every suite carries: ``suite``, ``command``, ``python``, ``machine``, 
 ``--check`` makes the exit status 1 when a goal is missed. New suites (``soak``,
 ``scale``) are one more entry in :data:`SUITES`.
 
-Logging is the caller's: ``dthc-bridge`` and ``python -m dthc_bridge.bench`` route
+Logging is the caller's: ``dthc-bridge`` and ``python -m dthc_tools.bench`` route
 structlog to stderr (warnings and up), so stdout holds the report alone.
 """
 

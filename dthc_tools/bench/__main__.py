@@ -1,4 +1,4 @@
-"""``python -m dthc_bridge.bench SUITE [--json] [options]``."""
+"""``python -m dthc_tools.bench SUITE [--json] [options]``."""
 
 from __future__ import annotations
 
@@ -10,4 +10,4 @@ from .cli import main
 
 if __name__ == "__main__":
     configure_logging("warning")  # the link layer logs to stderr; stdout is the report's
-    sys.exit(main(prog="python -m dthc_bridge.bench"))
+    sys.exit(main(prog="python -m dthc_tools.bench"))

@@ -30,7 +30,7 @@ TELEMETRY_HZ = 50.0
 
 
 def program_lines(name: str) -> list[str]:
-    text = resources.files("dthc_bridge").joinpath("programs", f"{name}.ngc").read_text()
+    text = resources.files("dthc_tools.demo").joinpath("programs", f"{name}.ngc").read_text()
     return text.splitlines()
 
 

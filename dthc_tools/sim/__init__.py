@@ -1,0 +1,1 @@
+"""The daemon's controller service closing the loop over a simulated board, in simulated time."""
