@@ -1,8 +1,9 @@
 """BoardClient: the typed async API the plasma controller uses to drive the board.
 
 Units at this level are millimetres, seconds, volts and amperes; the wire's integer units
-stay below it. Telemetry arrives through callbacks (the THC loop, lowest latency) and as
-an async stream (diagnostics, tests).
+stay below it. Telemetry arrives through registered listeners (the THC loop, lowest
+latency), each item with its board time in seconds on the link's continuous timeline, and
+as an async stream (diagnostics, tests).
 """
 
 from __future__ import annotations
@@ -16,14 +17,14 @@ import firmware_protocol as fp
 
 from .link import LinkSupervisor, RequestTimeout
 from .link.session import BoardSession
+from .link.supervisor import ErrorListener, StateListener
 
-__all__ = ["BoardClient", "Telemetry"]
+__all__ = ["BoardClient", "Telemetry", "TelemetryListener"]
 
-Telemetry = fp.Samples | fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult
+Telemetry = fp.Samples | fp.Report
+# An item and its board time in seconds (SAMPLES: of the first sample).
+TelemetryListener = Callable[[Telemetry, float], None]
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
-
-SENSOR_OHMIC = 1 << fp.InputBit.OHMIC
-SENSOR_FLOAT = 1 << fp.InputBit.FLOAT
 
 
 def _um(mm: float) -> int:
@@ -33,7 +34,7 @@ def _um(mm: float) -> int:
 class BoardClient:
     def __init__(self, supervisor: LinkSupervisor, *, stream_size: int = 1024) -> None:
         self.link = supervisor
-        self._listeners: list[Callable[[Telemetry], None]] = []
+        self._listeners: list[TelemetryListener] = []
         self._queues: list[asyncio.Queue[Telemetry]] = []
         self._stream_size = stream_size
         # Completions that arrived before anybody waited (an ACK and the report can come in
@@ -41,18 +42,32 @@ class BoardClient:
         self._recent: OrderedDict[tuple[type, int], fp.Message] = OrderedDict()
         self._waiters: dict[tuple[type, int], asyncio.Future[fp.Message]] = {}
         self.last_status: fp.Status | None = None
-        supervisor.on_samples = self._on_samples
-        supervisor.on_report = self._on_report
-        supervisor.on_event_gap = self._on_event_gap
+        supervisor.add_samples_listener(self._publish)
+        supervisor.add_report_listener(self._on_report)
+        supervisor.add_event_gap_listener(self._on_event_gap)
 
     # --- telemetry -------------------------------------------------------------------------
 
-    def add_listener(self, listener: Callable[[Telemetry], None]) -> None:
+    def add_listener(self, listener: TelemetryListener) -> None:
+        """Every batch and report, on the hot path. A listener that raises is caught at the
+        link (see ``add_error_listener``), so it must not leave the board unattended."""
         self._listeners.append(listener)
 
-    def _publish(self, item: Telemetry) -> None:
+    def add_state_listener(self, listener: StateListener) -> None:
+        self.link.add_state_listener(listener)
+
+    def add_error_listener(self, listener: ErrorListener) -> None:
+        """Called when a listener raised while handling board data (invariant 6)."""
+        self.link.add_error_listener(listener)
+
+    @property
+    def board_time_s(self) -> float:
+        """The latest board time seen, in seconds: when a host command takes effect."""
+        return self.link.timeline.now_s
+
+    def _publish(self, item: Telemetry, t_s: float) -> None:
         for listener in self._listeners:
-            listener(item)
+            listener(item, t_s)
         for queue in self._queues:
             if queue.full():
                 queue.get_nowait()  # the stream keeps the newest; counted as a gap upstream
@@ -68,10 +83,7 @@ class BoardClient:
         finally:
             self._queues.remove(queue)
 
-    def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
-        self._publish(batch)
-
-    def _on_report(self, msg: fp.Message) -> None:
+    def _on_report(self, msg: fp.Report, t_s: float) -> None:
         if isinstance(msg, fp.MotionDone | fp.ProbeResult):
             key = (type(msg), msg.seq)
             waiter = self._waiters.pop(key, None)
@@ -81,8 +93,7 @@ class BoardClient:
                 self._recent[key] = msg
                 while len(self._recent) > 16:
                     self._recent.popitem(last=False)
-        if isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult):
-            self._publish(msg)
+        self._publish(msg, t_s)
 
     def _on_event_gap(self, missed: int) -> None:
         # A lost edge or fault report: learn the current state instead of guessing.
@@ -161,7 +172,7 @@ class BoardClient:
         self,
         feed_mm_s: float,
         max_travel_mm: float,
-        sensors: int = SENSOR_OHMIC | SENSOR_FLOAT,
+        sensors: int = fp.InputMask.OHMIC | fp.InputMask.FLOAT,
         timeout_s: float = 20.0,
     ) -> fp.ProbeResult:
         """Probe down; the board stops on contact by itself and reports where."""

@@ -28,9 +28,19 @@ from .link import LinkSupervisor
 from .mqtt.gateway import MqttGateway
 from .service import ControllerService
 
-__all__ = ["run_daemon"]
+__all__ = ["build_controller", "build_service", "run_daemon"]
 
 log = structlog.get_logger("dthc_bridge.daemon")
+
+
+def build_controller(config: DaemonConfig) -> PlasmaController:
+    """The pure controller (cut sequence, THC, mode) as the configuration says: the daemon
+    runs it, and so does the closed-loop simulation the benchmarks measure."""
+    sequence = CutSequence(
+        config.controller.sequence(), ThcController(config.controller.thc.build())
+    )
+    sequence.mode = config.controller.thc_mode
+    return PlasmaController(sequence)
 
 
 def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
@@ -38,10 +48,6 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
     board = config.board
     supervisor = LinkSupervisor(board.link, board.timing(), baudrate=board.baudrate)
     client = BoardClient(supervisor)
-    sequence = CutSequence(
-        config.controller.sequence(), ThcController(config.controller.thc.build())
-    )
-    sequence.mode = config.controller.thc_mode
 
     async def setup(client: BoardClient) -> None:
         await client.configure(
@@ -55,7 +61,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         )
 
     service = ControllerService(
-        PlasmaController(sequence), supervisor, client, board_setup=setup,
+        build_controller(config), supervisor, client, board_setup=setup,
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
     )  # fmt: skip

@@ -5,6 +5,11 @@ board telemetry goes into the cut sequence in the link's receive callback (so th
 Z velocity leaves in the same callback as the samples arrived: the hot path), board
 requests run in order on one worker task, completions come back as events, and the
 sequence's replies answer the sender's pending M3/M5.
+
+Time is the board's: the sequence and the THC run on the sample timestamps (on the link's
+continuous timeline), and a command from the sender takes effect at the latest board time
+seen. A listener bug while handling board data is caught at the link, which calls
+:meth:`_on_handler_error`: the cut ends through the fault path (DESIGN invariant 6).
 """
 
 from __future__ import annotations
@@ -12,7 +17,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import re
-import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from typing import Any
 
@@ -20,22 +24,33 @@ import structlog
 
 import firmware_protocol as fp
 
-from .board import SENSOR_FLOAT, SENSOR_OHMIC, BoardClient, Telemetry
+from .board import BoardClient, Telemetry
 from .controller import actions as act
-from .controller.commands import Command, CommandError
+from .controller.commands import Command, CommandError, CycleStart
 from .controller.gcode import parse_line, parse_request
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence, with_board_limits
-from .link import LinkError, LinkState, LinkSupervisor
+from .events import (
+    ArcLost,
+    BoardFaulted,
+    BoardRestarted,
+    ControllerEvent,
+    LinkChanged,
+    ProgramPaused,
+    ResumePointMarked,
+)
+from .link import LinkError, LinkState, LinkStateChange, LinkSupervisor
 from .mqtt.port import CommandResult
 
-__all__ = ["ControllerService", "feed_samples"]
+__all__ = ["ControllerService", "EventListener", "feed_samples"]
 
 log = structlog.get_logger("dthc_bridge.service")
 
 _FEED = re.compile(r"(?i)\bF\s*([0-9]*\.?[0-9]+)")
 _CUTTING_MOTION = re.compile(r"(?i)\bG0*[123]\b")
 EVENT_QUEUE_SIZE = 256
+
+EventListener = Callable[[ControllerEvent], None]
 
 
 class ControllerService:
@@ -49,29 +64,29 @@ class ControllerService:
         board_setup: Callable[[BoardClient], Awaitable[None]] | None = None,
     ) -> None:
         self.controller = controller
-        self.seq = controller.seq
+        self.sequence = controller.sequence
         self.supervisor = supervisor
         self.client = client
         self.command_timeout_s = command_timeout_s
         self.board_setup = board_setup
         self._loop = asyncio.get_running_loop()
-        self._clock0 = time.monotonic()
         self._work: asyncio.Queue[act.BoardAction] = asyncio.Queue()
         self._reply: asyncio.Future[act.CommandReply] | None = None
         self._command_lock = asyncio.Lock()
-        self._events: list[asyncio.Queue[dict[str, object]]] = []
+        self._event_listeners: list[EventListener] = []
         self._background: set[asyncio.Task[None]] = set()
         self._requested_feed_mm_s: float | None = None
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
-        self._board_limits_set = False
+        self.handler_errors = 0
         client.add_listener(self._on_board)
-        self._previous_on_state = supervisor.on_state
-        supervisor.on_state = self._on_link_state
+        client.add_state_listener(self._on_link_state)
+        client.add_error_listener(self._on_handler_error)
 
     @property
     def now(self) -> float:
-        return time.monotonic() - self._clock0
+        """Board time, in seconds: when a command from the sender takes effect."""
+        return self.client.board_time_s
 
     # --- the ControllerPort seam -----------------------------------------------------------
 
@@ -102,21 +117,17 @@ class ControllerService:
         return await self._execute(command, None)
 
     async def sender_lost(self, reason: str) -> None:
-        if self.seq.busy:
+        if self.sequence.busy:
             log.warning("sender_lost_mid_cut", reason=reason)
-            self.seq.abort(f"sender lost: {reason}")
-            self._pump()
+            self.sequence.abort(f"sender lost: {reason}")
+            self.pump()
 
     def snapshot(self) -> dict[str, object]:
-        state = self.seq.snapshot()
+        state = self.sequence.snapshot()
         state["board"] = self._link[0]
+        point = self.controller.last_resume_point
         state["resume_point"] = (
-            None
-            if self.controller.last_resume_point is None
-            else {
-                "line": self.controller.last_resume_point.line,
-                "index": self.controller.last_resume_point.index,
-            }
+            None if point is None else {"line": point.line, "index": point.index}
         )
         return state
 
@@ -128,17 +139,18 @@ class ControllerService:
         session = self.supervisor.session
         if session is not None:
             out["decoder"] = session.decoder.stats.as_dict()
-        out["pierces"] = self.seq.pierce_count
+        out["pierces"] = self.sequence.pierce_count
+        out["handler_errors"] = self.handler_errors
         return out
 
     def telemetry(self) -> dict[str, object] | None:
         if self._last_batch is None:
             return None
         t, z_mm, xy = self._last_batch
-        thc = self.seq.thc
+        thc = self.sequence.thc
         return {
             "t": round(t, 4),
-            "state": str(self.seq.state),
+            "state": str(self.sequence.state),
             "voltage_v": thc.filtered_v,
             "target_v": thc.target_v,
             # While a steady slow-down is followed: the voltage it is held at.
@@ -148,44 +160,68 @@ class ControllerService:
             "locks": sorted(str(lock) for lock in thc.locks(t)),
         }
 
-    async def subscribe_events(self) -> AsyncIterator[dict[str, object]]:
-        queue: asyncio.Queue[dict[str, object]] = asyncio.Queue(EVENT_QUEUE_SIZE)
-        self._events.append(queue)
+    def add_event_listener(self, listener: EventListener) -> None:
+        """Every event, synchronously, as it happens."""
+        self._event_listeners.append(listener)
+
+    async def subscribe_events(self) -> AsyncIterator[ControllerEvent]:
+        """Events as an async stream (bounded: the oldest are dropped if unread)."""
+        queue: asyncio.Queue[ControllerEvent] = asyncio.Queue(EVENT_QUEUE_SIZE)
+
+        def enqueue(event: ControllerEvent) -> None:
+            if queue.full():
+                queue.get_nowait()
+            queue.put_nowait(event)
+
+        self._event_listeners.append(enqueue)
         try:
             while True:
                 yield await queue.get()
         finally:
-            self._events.remove(queue)
+            self._event_listeners.remove(enqueue)
 
     # --- commands --------------------------------------------------------------------------
 
     async def _execute(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult:
+        if isinstance(command, CycleStart):
+            # Cycle start answers the M3 that waits for it (G200 S1): queued behind that M3
+            # it would wait for itself. It never defers, so it needs no turn.
+            return self._execute_now(command, xy_mm)
         async with self._command_lock:  # one plasma command at a time, in arrival order
             try:
                 outcome = self.controller.handle(command, self.now, xy_mm)
             except CommandError as exc:
                 return CommandResult(False, error=str(exc))
-            if outcome.data.get("resume_line") is not None or "index" in outcome.data:
-                self._publish_event({"type": "resume_point", **outcome.data})
+            point = outcome.resume_point
+            if point is not None:
+                self._publish_event(ResumePointMarked(self.now, point.line, point.index))
             if not outcome.deferred:
-                self._pump()
+                self.pump()
                 return CommandResult(True, outcome.data)
             self._reply = self._loop.create_future()
-            self._pump()
+            self.pump()
             try:
                 reply = await asyncio.wait_for(asyncio.shield(self._reply), self.command_timeout_s)
             except TimeoutError:
-                self.seq.abort(f"{type(command).__name__} not completed in time")
-                self._pump()
+                self.sequence.abort(f"{type(command).__name__} not completed in time")
+                self.pump()
                 return CommandResult(False, error="timeout: the sequence did not complete")
             except asyncio.CancelledError:
                 # The requester gave up (deadline): a cut nobody waits for is ended safely.
-                self.seq.abort(f"{type(command).__name__} cancelled by its requester")
-                self._pump()
+                self.sequence.abort(f"{type(command).__name__} cancelled by its requester")
+                self.pump()
                 raise
             finally:
                 self._reply = None
             return CommandResult(reply.ok, {"command": reply.command}, reply.error)
+
+    def _execute_now(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult:
+        try:
+            outcome = self.controller.handle(command, self.now, xy_mm)
+        except CommandError as exc:
+            return CommandResult(False, error=str(exc))
+        self.pump()
+        return CommandResult(True, outcome.data)
 
     def _note_feed(self, motion: str) -> None:
         if _CUTTING_MOTION.search(motion):
@@ -195,17 +231,22 @@ class ControllerService:
 
     # --- actions ---------------------------------------------------------------------------
 
-    def _pump(self) -> None:
-        """Take the sequence's actions: Z velocity at once, the rest to the worker in order."""
-        for action in self.seq.drain():
-            if isinstance(action, act.ZVelocity):
+    def pump(self) -> None:
+        """Take the sequence's actions: Z velocity at once, the rest to the worker in order.
+
+        Called after everything that can change the sequence (here, and by the closed-loop
+        simulation after it pokes the sequence directly)."""
+        for action in self.sequence.drain():
+            if isinstance(action, act.SetZVelocity):
                 self._send_velocity(action.velocity_mm_s)
             elif isinstance(action, act.CommandReply):
                 if self._reply is not None and not self._reply.done():
                     self._reply.set_result(action)
             elif isinstance(action, act.PauseProgram):
-                kind = "arc_lost" if action.reason == "arc lost" else "pause"
-                self._publish_event({"type": kind, "reason": action.reason})
+                if action.cause is act.PauseCause.ARC_LOST:
+                    self._publish_event(ArcLost(self.now, action.reason))
+                else:
+                    self._publish_event(ProgramPaused(self.now, action.reason))
             else:
                 self._work.put_nowait(action)
 
@@ -220,32 +261,35 @@ class ControllerService:
         while True:
             action = await self._work.get()
             try:
-                await self._perform(action)
+                await self.perform(action)
             except (TimeoutError, LinkError) as exc:
-                self.seq.on_action_failed(action, str(exc))
-            self._pump()
+                self.sequence.on_action_failed(action, str(exc))
+            self.pump()
 
-    async def _perform(self, action: act.BoardAction) -> None:
+    async def perform(self, action: act.BoardAction) -> None:
+        """One board action as board requests (its completion comes back as an event)."""
         client = self.client
-        if isinstance(action, act.Torch):
+        if isinstance(action, act.SwitchTorch):
             await client.torch(action.on)
-        elif isinstance(action, act.OhmicSense):
+        elif isinstance(action, act.SwitchOhmicSense):
             await client.ohmic_sense(action.on)
         elif isinstance(action, act.MoveZ):
             seq = await client.start_move_z(action.target_mm, action.feed_mm_s)
             self._spawn(self._await_move(seq, action.token))
         elif isinstance(action, act.ProbeZ):
-            sensors = (SENSOR_OHMIC if action.ohmic else 0) | (
-                SENSOR_FLOAT if action.float_switch else 0
+            sensors = (fp.InputMask.OHMIC if action.ohmic else 0) | (
+                fp.InputMask.FLOAT if action.float_switch else 0
             )
             seq = await client.start_probe(action.feed_mm_s, action.max_travel_mm, sensors)
             self._spawn(self._await_probe(seq))
         elif isinstance(action, act.StopZ):
             await client.z_stop()
-        elif isinstance(action, act.SetCurrent):
+        elif isinstance(action, act.ApplyCurrent):
             await client.set_current(action.current_a)
         elif isinstance(action, act.ResetFaults):
             await client.fault_reset()
+        elif isinstance(action, act.SetZVelocity):
+            self._send_velocity(action.velocity_mm_s)
 
     def _spawn(self, work: Any) -> None:
         task = asyncio.create_task(work, name="board-completion")
@@ -256,54 +300,76 @@ class ControllerService:
         try:
             done = await self.client.wait_report(fp.MotionDone, seq, self.command_timeout_s)
         except LinkError as exc:
-            self.seq.on_action_failed(act.MoveZ(0, 0, token), str(exc))
+            self.sequence.on_action_failed(act.MoveZ(0, 0, token), str(exc))
         else:
-            self.seq.on_motion_done(token, done.result == fp.MotionResult.REACHED, done.z_um / 1000)
-        self._pump()
+            self.sequence.on_motion_done(
+                token, done.result == fp.MotionResult.REACHED, done.z_um / 1000
+            )
+        self.pump()
 
     async def _await_probe(self, seq: int) -> None:
         try:
             done = await self.client.wait_report(fp.ProbeResult, seq, self.command_timeout_s)
         except LinkError as exc:
-            self.seq.on_action_failed(act.ProbeZ(0, 0, False, False), str(exc))
+            self.sequence.on_action_failed(act.ProbeZ(0, 0, False, False), str(exc))
         else:
-            self.seq.on_probe_done(
-                done.result == fp.ProbeOutcome.CONTACT, bool(done.sensor & SENSOR_OHMIC),
+            self.sequence.on_probe_done(
+                done.result == fp.ProbeOutcome.CONTACT, bool(done.sensor & fp.InputMask.OHMIC),
                 done.contact_z_um / 1000, done.stop_z_um / 1000,
             )  # fmt: skip
-        self._pump()
+        self.pump()
 
     # --- board events ----------------------------------------------------------------------
 
-    def _on_board(self, item: Telemetry) -> None:
-        seq = self.seq
-        now = self.now
+    def _on_board(self, item: Telemetry, t_s: float) -> None:
+        sequence = self.sequence
         if isinstance(item, fp.Samples):
-            z_mm, xy = feed_samples(seq, item, self._requested_feed_mm_s, now)
+            t_last, z_mm, xy = feed_samples(sequence, item, t_s, self._requested_feed_mm_s)
             # Only what the batch brought is kept here; telemetry() builds the point at the
             # MQTT rate, not at the sample rate.
-            self._last_batch = (now, z_mm, xy)
+            self._last_batch = (t_last, z_mm, xy)
         elif isinstance(item, fp.Event):
-            seq.on_inputs(item.inputs, item.z_um / 1000, now)
+            # An edge may be stamped before the batch just handled: the sequence's clock
+            # only moves forward.
+            t_edge = max(t_s, self._last_batch[0]) if self._last_batch else t_s
+            sequence.on_inputs(item.inputs, item.z_um / 1000, t_edge)
         elif isinstance(item, fp.Fault):
             name = _fault_name(item.code)
-            self._publish_event({"type": "fault", "code": name, "faults": item.faults})
-            seq.on_board_fault(name)
-        self._pump()
+            self._publish_event(BoardFaulted(t_s, name, item.faults))
+            sequence.on_board_fault(name)
+        self.pump()
 
-    def _on_link_state(self, state: LinkState, reason: str) -> None:
-        if self._previous_on_state is not None:
-            self._previous_on_state(state, reason)
+    def _on_handler_error(self, error: Exception) -> None:
+        """A bug while handling board data (invariant 6): end the cut through the fault path.
+
+        The sequence may be the part that failed, so what keeps the table safe does not rely
+        on it: the torch-off request and a zero Z velocity go out first, directly."""
+        self.handler_errors += 1
+        self._send_velocity(0.0)
+        self._spawn(self._torch_off_quietly())
+        try:
+            self.sequence.abort(f"internal error: {type(error).__name__}: {error}")
+            self.pump()
+        except Exception:  # the sequence itself is broken: the board's lease ends the cut
+            log.exception("fault_path_failed")
+            self._publish_event(ProgramPaused(self.now, f"internal error: {error}"))
+
+    async def _torch_off_quietly(self) -> None:
+        with contextlib.suppress(LinkError, asyncio.TimeoutError):
+            await self.client.torch(False)
+
+    def _on_link_state(self, change: LinkStateChange) -> None:
+        state, reason = change.state, change.reason
         self._link = (str(state), reason)
-        self._publish_event({"type": "link", "state": str(state), "reason": reason})
-        if reason == "board_rebooted":
-            self._publish_event({"type": "board_rebooted"})
+        self._publish_event(LinkChanged(self.now, str(state), reason))
+        if change.board_rebooted:
+            self._publish_event(BoardRestarted(self.now))
         if state is LinkState.ONLINE:
             session = self.supervisor.session
             if session is not None and session.info is not None:
                 info = session.info
-                self.seq.config = with_board_limits(
-                    self.seq.config, info.z_min_um / 1000, info.z_max_um / 1000
+                self.sequence.config = with_board_limits(
+                    self.sequence.config, info.z_min_um / 1000, info.z_max_um / 1000
                 )
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
@@ -311,12 +377,12 @@ class ControllerService:
             if status is not None and status.faults:
                 # A fault latched while we were away (the lease ran out during an unplug):
                 # the operator re-arms before the next cut, which also resets the board.
-                self.seq.on_board_fault(_fault_names(status.faults))
-                self._pump()
+                self.sequence.on_board_fault(_fault_names(status.faults))
+                self.pump()
         elif state in (LinkState.OFFLINE, LinkState.INCOMPATIBLE):
-            self.seq.on_link_down(reason)
+            self.sequence.on_link_down(reason)
             # The torch-off request cannot reach an absent board; the board's lease does it.
-            self._pump()
+            self.pump()
 
     async def _setup_board(self, setup: Callable[[BoardClient], Awaitable[None]]) -> None:
         try:
@@ -324,32 +390,34 @@ class ControllerService:
         except LinkError as exc:
             log.warning("board_setup_failed", error=str(exc))
 
-    def _publish_event(self, event: dict[str, object]) -> None:
-        event = {"t": round(self.now, 3), **event}
-        for queue in self._events:
-            if queue.full():
-                queue.get_nowait()
-            queue.put_nowait(event)
+    def _publish_event(self, event: ControllerEvent) -> None:
+        for listener in list(self._event_listeners):
+            listener(event)
 
     async def shutdown(self) -> None:
         """SIGTERM/SIGINT: abort any cut, torch off, Z velocity zero; bounded in time."""
-        self.seq.abort("daemon stopping")
-        self.seq.drain()
+        self.sequence.abort("daemon stopping")
+        self.sequence.drain()
         with contextlib.suppress(LinkError, asyncio.TimeoutError):
             self._send_velocity(0.0)
             await asyncio.wait_for(self.client.torch(False), 0.5)
 
 
 def feed_samples(
-    seq: CutSequence, batch: fp.Samples, requested_feed_mm_s: float | None, now: float
-) -> tuple[float, float | None]:
-    """One SAMPLES batch into the cut sequence, in its units; returns (Z mm, XY mm/s)."""
+    sequence: CutSequence, batch: fp.Samples, t0_s: float, requested_feed_mm_s: float | None
+) -> tuple[float, float, float | None]:
+    """One SAMPLES batch into the cut sequence, in its units and on board time.
+
+    ``t0_s`` is the board time of the batch's first sample; the batch is handled at the
+    time of its last. Returns (that time, Z mm, XY speed mm/s or None)."""
+    period_s = batch.period_us / 1e6
+    t_last = t0_s + period_s * (len(batch.samples_cv) - 1)
     z_mm = batch.z_um / 1000
-    seq.on_inputs(batch.inputs, z_mm, now)
+    sequence.on_inputs(batch.inputs, z_mm, t_last)
     xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else None
     volts = [cv / 100 for cv in batch.samples_cv]
-    seq.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, now)
-    return z_mm, xy
+    sequence.on_samples(volts, period_s, z_mm, xy, requested_feed_mm_s, t_last)
+    return t_last, z_mm, xy
 
 
 def _fault_names(faults: int) -> str:

@@ -32,6 +32,7 @@ __all__ = [
     "FaultCode",
     "FilterKind",
     "InputBit",
+    "InputMask",
     "MotionResult",
     "MsgType",
     "NakCode",
@@ -112,6 +113,21 @@ class InputBit(IntEnum):
     ESTOP = 6
     Z_LIMIT_MIN = 7
     Z_LIMIT_MAX = 8
+
+
+class InputMask(IntFlag):
+    """The same inputs as masks over the snapshot (``1 << InputBit``), and as sensor sets
+    (ZProbe's ``sensors``)."""
+
+    ARC_OK = 1 << InputBit.ARC_OK
+    OHMIC = 1 << InputBit.OHMIC
+    FLOAT = 1 << InputBit.FLOAT
+    BREAKAWAY = 1 << InputBit.BREAKAWAY
+    THC_UP = 1 << InputBit.THC_UP
+    THC_DOWN = 1 << InputBit.THC_DOWN
+    ESTOP = 1 << InputBit.ESTOP
+    Z_LIMIT_MIN = 1 << InputBit.Z_LIMIT_MIN
+    Z_LIMIT_MAX = 1 << InputBit.Z_LIMIT_MAX
 
 
 class StatusBit(IntFlag):

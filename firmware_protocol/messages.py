@@ -34,6 +34,7 @@ __all__ = [
     "OhmicSense",
     "ProbeResult",
     "Query",
+    "Report",
     "Samples",
     "SetCurrent",
     "SetLease",
@@ -193,6 +194,11 @@ class Samples(NamedTuple):
     def has_xy_speed(self) -> bool:
         return self.xy_speed_dmm_s != XY_SPEED_UNKNOWN
 
+    @property
+    def t_last_us(self) -> int:
+        """Board time of the last sample (32-bit arithmetic, as ``t0_us``)."""
+        return (self.t0_us + self.period_us * (len(self.samples_cv) - 1)) & 0xFFFFFFFF
+
 
 class Event(NamedTuple):
     """An input edge. ``counter`` is shared with FAULT; a gap means a lost event."""
@@ -277,6 +283,8 @@ BoardMessage = (
     Ack | Nak | HelloInfo | Samples | Event | Fault | MotionDone | ProbeResult | Status | Clock
 )
 Message = HostMessage | BoardMessage
+# What the board reports unasked, each with the board time it happened at.
+Report = Event | Fault | MotionDone | ProbeResult
 
 HOST_MESSAGES: tuple[type[HostMessage], ...] = (
     Hello,

@@ -7,31 +7,33 @@ and feeds the outcomes back as events.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import StrEnum
 
 __all__ = [
     "Action",
+    "ApplyCurrent",
     "BoardAction",
     "CommandReply",
     "MoveZ",
     "Notice",
-    "OhmicSense",
+    "PauseCause",
     "PauseProgram",
     "ProbeZ",
     "ResetFaults",
-    "SetCurrent",
+    "SetZVelocity",
     "StopZ",
-    "Torch",
-    "ZVelocity",
+    "SwitchOhmicSense",
+    "SwitchTorch",
 ]
 
 
 @dataclass(frozen=True, slots=True)
-class Torch:
+class SwitchTorch:
     on: bool
 
 
 @dataclass(frozen=True, slots=True)
-class OhmicSense:
+class SwitchOhmicSense:
     on: bool
 
 
@@ -53,7 +55,9 @@ class ProbeZ:
 
 
 @dataclass(frozen=True, slots=True)
-class ZVelocity:
+class SetZVelocity:
+    """The THC's output: Z velocity now (streamed, expires on the board)."""
+
     velocity_mm_s: float
 
 
@@ -63,7 +67,9 @@ class StopZ:
 
 
 @dataclass(frozen=True, slots=True)
-class SetCurrent:
+class ApplyCurrent:
+    """Set the plasma cutter's current (where the board drives it)."""
+
     current_a: float
 
 
@@ -81,13 +87,29 @@ class CommandReply:
     error: str = ""
 
 
+class PauseCause(StrEnum):
+    FAULT = "fault"  # invariant 3: the cut ended through the fault path
+    ARC_LOST = "arc_lost"  # the same, because the arc went out
+    STOP_AFTER_PIERCE = "stop_after_pierce"  # G200 S1: waits for cycle start
+
+
 @dataclass(frozen=True, slots=True)
 class PauseProgram:
     """Ask the sender to pause (feed hold) the program, with the reason."""
 
     reason: str
+    cause: PauseCause = PauseCause.FAULT
 
 
-BoardAction = Torch | OhmicSense | MoveZ | ProbeZ | ZVelocity | StopZ | SetCurrent | ResetFaults
+BoardAction = (
+    SwitchTorch
+    | SwitchOhmicSense
+    | MoveZ
+    | ProbeZ
+    | SetZVelocity
+    | StopZ
+    | ApplyCurrent
+    | ResetFaults
+)
 Notice = CommandReply | PauseProgram
 Action = BoardAction | Notice

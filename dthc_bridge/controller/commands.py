@@ -22,7 +22,7 @@ __all__ = [
     "ProbeAndStart",
     "Rearm",
     "ResumePoint",
-    "SetCurrent",
+    "SelectCurrent",
     "SetCutParams",
     "ThcEnable",
     "ThcMode",
@@ -138,7 +138,7 @@ class ResumePoint:
 
 
 @dataclass(frozen=True, slots=True)
-class SetCurrent:
+class SelectCurrent:
     """RosettaCNC G100 P4 A: plasma current set point."""
 
     current_a: float
@@ -205,7 +205,7 @@ Command = (
     | ThcEnable
     | VoltageAdjust
     | ResumePoint
-    | SetCurrent
+    | SelectCurrent
     | VoltageMode
     | ProbeAndStart
     | OperatingMode

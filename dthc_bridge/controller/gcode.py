@@ -75,7 +75,7 @@ from .commands import (
     ProbeAndStart,
     Rearm,
     ResumePoint,
-    SetCurrent,
+    SelectCurrent,
     SetCutParams,
     ThcEnable,
     ThcMode,
@@ -341,7 +341,7 @@ def _g100(words: Sequence[_Word], line: int | None) -> Command:
         return ResumePoint(line)
     if function == 4:
         p = _Params(command, rest, "A")
-        return SetCurrent(check_range(p.name("A"), p.positive("A"), 0.0, 400.0))
+        return SelectCurrent(check_range(p.name("A"), p.positive("A"), 0.0, 400.0))
     if function == 5:
         p = _Params(command, rest, "AB")
         if p.choice("A", (0, 1)) == 1:

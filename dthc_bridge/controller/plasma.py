@@ -22,7 +22,7 @@ from .commands import (
     ProbeAndStart,
     Rearm,
     ResumePoint,
-    SetCurrent,
+    SelectCurrent,
     SetCutParams,
     ThcEnable,
     TorchStart,
@@ -33,13 +33,7 @@ from .commands import (
 )
 from .sequence import CutSequence, State
 
-__all__ = ["Outcome", "PlasmaController"]
-
-
-@dataclass(frozen=True)
-class Outcome:
-    deferred: bool = False  # the sequence answers later with a CommandReply
-    data: dict[str, Any] = field(default_factory=dict)
+__all__ = ["Outcome", "PlasmaController", "ResumeTrack"]
 
 
 @dataclass(frozen=True)
@@ -48,9 +42,16 @@ class ResumeTrack:
     index: int  # the how-many-th P0 of the program
 
 
+@dataclass(frozen=True)
+class Outcome:
+    deferred: bool = False  # the sequence answers later with a CommandReply
+    data: dict[str, Any] = field(default_factory=dict)
+    resume_point: ResumeTrack | None = None  # a G100 P0 just marked one
+
+
 class PlasmaController:
     def __init__(self, sequence: CutSequence | None = None) -> None:
-        self.seq = sequence or CutSequence()
+        self.sequence = sequence or CutSequence()
         self.resume_points: list[ResumeTrack] = []
 
     @property
@@ -60,77 +61,84 @@ class PlasmaController:
     def handle(
         self, command: Command, now: float, xy_mm: tuple[float, float] | None = None
     ) -> Outcome:
-        seq = self.seq
+        sequence = self.sequence
         if isinstance(command, TorchStart):
-            seq.start(now, xy_mm)
+            sequence.start(now, xy_mm)
             return Outcome(deferred=True)
         if isinstance(command, TorchStop):
-            seq.stop(now, xy_mm)
+            sequence.stop(now, xy_mm)
             return Outcome(deferred=True)
         if isinstance(command, ProbeAndStart):
             return self._probe_and_start(command, now, xy_mm)
         if isinstance(command, PlasmaMode):
-            if seq.busy and not command.enabled:
+            if sequence.busy and not command.enabled:
                 raise CommandError(f"T{command.tool} M6", "cannot leave plasma mode during a cut")
-            seq.plasma_mode = command.enabled
+            sequence.plasma_mode = command.enabled
         elif isinstance(command, SetCutParams):
-            seq.set_params(command.params)  # a later G200 overwrites; takes effect next cut
+            sequence.set_params(command.params)  # a later G200 overwrites; takes effect next cut
         elif isinstance(command, LegacyMode):
-            if seq.busy:
+            if sequence.busy:
                 raise CommandError("G200", "cannot switch to legacy mode during a cut")
-            seq.g200_active = False
+            sequence.g200_active = False
         elif isinstance(command, ThcEnable):
-            seq.set_thc(command.enabled, command.z_feed_mm_min)
+            sequence.set_thc(command.enabled, command.z_feed_mm_min)
         elif isinstance(command, VoltageAdjust):
-            seq.adjust_voltage(command.delta_v)
-            return Outcome(data={"target_v": seq.thc.target_v, "offset_v": seq.voltage_offset_v})
+            sequence.adjust_voltage(command.delta_v)
+            return Outcome(
+                data={"target_v": sequence.thc.target_v, "offset_v": sequence.voltage_offset_v}
+            )
         elif isinstance(command, ResumePoint):
-            self.resume_points.append(ResumeTrack(command.line, len(self.resume_points)))
-            return Outcome(data={"resume_line": command.line, "index": len(self.resume_points) - 1})
-        elif isinstance(command, SetCurrent):
-            seq.request_current(command.current_a)
+            point = ResumeTrack(command.line, len(self.resume_points))
+            self.resume_points.append(point)
+            return Outcome(
+                data={"resume_line": point.line, "index": point.index}, resume_point=point
+            )
+        elif isinstance(command, SelectCurrent):
+            sequence.request_current(command.current_a)
         elif isinstance(command, VoltageMode):
             volts = None if command.auto else command.volts
-            seq.set_params(replace(seq.params, cut_voltage_v=volts))
+            sequence.set_params(replace(sequence.params, cut_voltage_v=volts))
         elif isinstance(command, OperatingMode):
-            if seq.busy:
+            if sequence.busy:
                 raise CommandError("operating_mode", "cannot change the mode during a cut")
-            seq.mode = command.mode
+            sequence.mode = command.mode
         elif isinstance(command, VelocityReduction):
-            seq.velocity_percent = command.percent if command.percent > 0 else 100.0
+            sequence.velocity_percent = command.percent if command.percent > 0 else 100.0
         elif isinstance(command, CycleStart):
-            if seq.state is not State.S1_WAIT:
-                raise CommandError("cycle_start", f"nothing waits for cycle start ({seq.state})")
-            seq.cycle_start(now)
+            if sequence.state is not State.S1_WAIT:
+                raise CommandError(
+                    "cycle_start", f"nothing waits for cycle start ({sequence.state})"
+                )
+            sequence.cycle_start(now)
         elif isinstance(command, Rearm):
-            if seq.state is not State.FAULTED:
-                raise CommandError("rearm", f"nothing to re-arm ({seq.state})")
-            seq.rearm(now)
+            if sequence.state is not State.FAULTED:
+                raise CommandError("rearm", f"nothing to re-arm ({sequence.state})")
+            sequence.rearm(now)
         elif isinstance(command, OhmicTest):
-            if seq.busy:
+            if sequence.busy:
                 raise CommandError("ohmic_test", "not during a cut")
-            seq.ohmic_test(now)
+            sequence.ohmic_test(now)
         return Outcome()
 
     def _probe_and_start(
         self, p6: ProbeAndStart, now: float, xy_mm: tuple[float, float] | None
     ) -> Outcome:
-        seq = self.seq
+        sequence = self.sequence
         params = replace(
-            seq.params,
+            sequence.params,
             touch_feed_mm_min=p6.touch_feed_mm_min,
             pierce_height_mm=p6.pierce_height_mm,
             pierce_delay_ms=p6.pierce_delay_s * 1000.0,
             cut_height_mm=p6.cut_height_mm,
         )
         if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
-            seq.set_params(params)
+            sequence.set_params(params)
             return Outcome(data={"mode": p6.mode})
-        seq.set_params(params)
-        seq.config = replace(seq.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
+        sequence.set_params(params)
+        sequence.config = replace(sequence.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
         # RosettaCNC has no T112 M6: P6 itself says the plasma tool is active.
-        seq.plasma_mode = True
+        sequence.plasma_mode = True
         # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
-        seq.set_thc(False)
-        seq.start(now, xy_mm)
+        sequence.set_thc(False)
+        sequence.start(now, xy_mm)
         return Outcome(deferred=True)

@@ -19,21 +19,13 @@ from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
 
-from firmware_protocol.constants import InputBit
+from firmware_protocol.constants import InputMask
 
 from . import actions as act
 from .commands import CutParams, ThcMode
 from .thc import Lock, ThcController
 
 __all__ = ["CutSequence", "SequenceConfig", "State"]
-
-ARC_OK = 1 << InputBit.ARC_OK
-OHMIC = 1 << InputBit.OHMIC
-FLOAT = 1 << InputBit.FLOAT
-BREAKAWAY = 1 << InputBit.BREAKAWAY
-THC_UP = 1 << InputBit.THC_UP
-THC_DOWN = 1 << InputBit.THC_DOWN
-ESTOP = 1 << InputBit.ESTOP
 
 
 class State(StrEnum):
@@ -218,7 +210,7 @@ class CutSequence:
 
     def request_current(self, current_a: float) -> None:
         """Plasma current set point (analog output): passed to the board as it comes."""
-        self._emit(act.SetCurrent(current_a))
+        self._emit(act.ApplyCurrent(current_a))
 
     def adjust_voltage(self, delta_v: float) -> None:
         self.voltage_offset_v += delta_v
@@ -241,7 +233,7 @@ class CutSequence:
         if not self.g200_active:
             self._reply(False, "legacy mode (bare G200): no automatic start sequence")
             return
-        if self._debounced & (OHMIC | FLOAT | BREAKAWAY):
+        if self._debounced & (InputMask.OHMIC | InputMask.FLOAT | InputMask.BREAKAWAY):
             self._fault("float, ohmic or breakaway active before probing")
             return
         self.error = ""
@@ -281,7 +273,7 @@ class CutSequence:
         self.now = now
         self._pending_reply = "M5"
         if self.state is State.FAULTED or not self.busy:
-            self._emit(act.Torch(False))
+            self._emit(act.SwitchTorch(False))
             self._reply(True)
             return
         self.last_cut_end_xy = xy_mm
@@ -310,7 +302,7 @@ class CutSequence:
         self.now = now
         if self.busy:
             return
-        self._emit(act.OhmicSense(True))
+        self._emit(act.SwitchOhmicSense(True))
         self._enter(State.OHMIC_TEST, 0.1)
 
     # --- events from the board -------------------------------------------------------------
@@ -341,16 +333,24 @@ class CutSequence:
             State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
             State.CUTTING, State.PAUSE_AT_END,
         )  # fmt: skip
-        if bit == BREAKAWAY and active and self.busy:
+        if bit == InputMask.BREAKAWAY and active and self.busy:
             self._fault("breakaway switch tripped")
-        elif bit == ESTOP and active:
+        elif bit == InputMask.ESTOP and active:
             self._fault("E-stop")
-        elif bit in (FLOAT, OHMIC) and active and cutting and self._arc_ok_seen():
-            self._fault(f"{'float switch' if bit == FLOAT else 'ohmic contact'} during the cut")
-        elif bit == OHMIC and active and self.state is State.OHMIC_TEST:
-            self._emit(act.OhmicSense(False))
+        elif (
+            bit in (InputMask.FLOAT, InputMask.OHMIC) and active and cutting and self._arc_ok_seen()
+        ):
+            self._fault(
+                f"{'float switch' if bit == InputMask.FLOAT else 'ohmic contact'} during the cut"
+            )
+        elif bit == InputMask.OHMIC and active and self.state is State.OHMIC_TEST:
+            self._emit(act.SwitchOhmicSense(False))
             self._fault("ohmic test: contact with the torch in the air (shorted torch?)")
-        elif bit in (FLOAT, OHMIC) and not active and self.state is State.CREEP_UP:
+        elif (
+            bit in (InputMask.FLOAT, InputMask.OHMIC)
+            and not active
+            and self.state is State.CREEP_UP
+        ):
             self._released()
 
     def _arc_ok_seen(self) -> bool:
@@ -361,7 +361,7 @@ class CutSequence:
             return True
         if self.mode is ThcMode.VOLTAGE_ONLY:
             return self._voltage_arc_ok()
-        return bool(self._debounced & ARC_OK)
+        return bool(self._debounced & InputMask.ARC_OK)
 
     def _voltage_arc_ok(self) -> bool:
         cfg = self.config
@@ -391,7 +391,7 @@ class CutSequence:
         self.cut.zero_mm = math.nan
         self._creep_sensor_ohmic = ohmic
         self._enter(State.CREEP_UP)
-        self._emit(act.OhmicSense(ohmic))
+        self._emit(act.SwitchOhmicSense(ohmic))
         self._move(stop_z_mm + cfg.float_travel_mm + 2.0, cfg.creep_speed_mm_s)
 
     def _released(self) -> None:
@@ -401,7 +401,7 @@ class CutSequence:
         self.cut.zero_mm = self._z_mm + offset
         self.last_zero_mm = self.cut.zero_mm
         self.probe_required = False
-        self._emit(act.OhmicSense(False))
+        self._emit(act.SwitchOhmicSense(False))
         self._to_pierce()  # the pierce move supersedes the creep
 
     def on_motion_done(self, token: int, reached: bool, z_mm: float) -> None:
@@ -423,7 +423,7 @@ class CutSequence:
             use_ohmic = self.params.ohmic
             self._enter(State.PROBING)
             if use_ohmic:
-                self._emit(act.OhmicSense(True))
+                self._emit(act.SwitchOhmicSense(True))
             self._emit(
                 act.ProbeZ(
                     self.params.touch_feed_mm_min / 60.0,
@@ -438,7 +438,12 @@ class CutSequence:
             self._torch_on()
         elif state is State.S1_RAISE:
             self._enter(State.S1_WAIT)
-            self._emit(act.PauseProgram("stop after pierce: clean the surface, then cycle start"))
+            self._emit(
+                act.PauseProgram(
+                    "stop after pierce: clean the surface, then cycle start",
+                    act.PauseCause.STOP_AFTER_PIERCE,
+                )
+            )
         elif state is State.S1_LOWER:
             assert self.cut is not None
             self.cut.relit = True
@@ -466,7 +471,7 @@ class CutSequence:
             self._fault(reason)
 
     def on_action_failed(self, action: act.Action, error: str) -> None:
-        if isinstance(action, act.Torch) and not action.on:
+        if isinstance(action, act.SwitchTorch) and not action.on:
             return  # the board turns the torch off on any fault by itself
         if self.busy:
             self._fault(f"{type(action).__name__} failed: {error}")
@@ -540,7 +545,7 @@ class CutSequence:
             self._fault("Z max limit reached during THC")
             return
         cut.thc_lift_mm = max(cut.thc_lift_mm, self._z_mm - self._cut_z())
-        self._emit(act.ZVelocity(velocity))
+        self._emit(act.SetZVelocity(velocity))
 
     def _updown_velocity(self) -> float:
         if not self.thc_enabled or self.thc.frozen:
@@ -549,9 +554,9 @@ class CutSequence:
         if Lock.VELOCITY in locks or Lock.NO_SPEED in locks:
             return 0.0
         speed = self.config.thc_updown_speed_mm_s
-        if self._debounced & THC_UP:
+        if self._debounced & InputMask.THC_UP:
             return speed
-        if self._debounced & THC_DOWN:
+        if self._debounced & InputMask.THC_DOWN:
             return -speed
         return 0.0
 
@@ -596,7 +601,7 @@ class CutSequence:
                 if cut.arc_lost_since is None:
                     cut.arc_lost_since = now
                 elif now - cut.arc_lost_since >= self.config.arc_lost_delay_s:
-                    self._fault("arc lost")
+                    self._fault("arc lost", act.PauseCause.ARC_LOST)
                     return
             else:
                 cut.arc_lost_since = None
@@ -605,7 +610,7 @@ class CutSequence:
         self._timer = None
         if state is State.ARC_WAIT:
             assert cut is not None
-            self._emit(act.Torch(False))
+            self._emit(act.SwitchTorch(False))
             if cut.attempts >= self.config.arc_start_attempts:
                 self._fault(f"no arc OK after {cut.attempts} start attempts")
             else:
@@ -620,7 +625,7 @@ class CutSequence:
         elif state is State.PAUSE_AT_END:
             self._end_cut()
         elif state is State.OHMIC_TEST:
-            self._emit(act.OhmicSense(False))
+            self._emit(act.SwitchOhmicSense(False))
             self._enter(State.IDLE)
 
     # --- steps -----------------------------------------------------------------------------
@@ -658,14 +663,14 @@ class CutSequence:
         cut.attempts += 1
         self._voltages.clear()
         if not self.config.dry_run:
-            self._emit(act.Torch(True))
+            self._emit(act.SwitchTorch(True))
         self._enter(State.ARC_WAIT, self.config.arc_ok_timeout_s)
 
     def _after_pierce(self) -> None:
         assert self.cut is not None
         cfg = self.config
         if self.params.stop_after_pierce and not self.cut.relit:
-            self._emit(act.Torch(False))
+            self._emit(act.SwitchTorch(False))
             self._enter(State.S1_RAISE)
             self._move(self.safe_z_mm, cfg.setup_speed_mm_s)
             return
@@ -697,18 +702,18 @@ class CutSequence:
 
     def _end_cut(self) -> None:
         self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
-        self._emit(act.ZVelocity(0.0), act.Torch(False))
+        self._emit(act.SetZVelocity(0.0), act.SwitchTorch(False))
         if self.cut is not None and not math.isnan(self.cut.zero_mm):
             self._update_safe_z()
         self._enter(State.TO_SAFE)
         self._move(self.safe_z_mm, self.config.setup_speed_mm_s)
 
-    def _fault(self, reason: str) -> None:
+    def _fault(self, reason: str, cause: act.PauseCause = act.PauseCause.FAULT) -> None:
         """Invariant 3: torch off, sender paused, Z to safe height, touch-off required."""
         self.error = reason
         self.probe_required = True
         self._enter(State.FAULTED)
-        self._emit(act.Torch(False), act.ZVelocity(0.0), act.OhmicSense(False))
+        self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0), act.SwitchOhmicSense(False))
         if self.cut is not None and not math.isnan(self.cut.zero_mm):
             self._update_safe_z()
         target = max(self.safe_z_mm, self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm)
@@ -716,7 +721,7 @@ class CutSequence:
             min(target, self.config.z_max_mm - self.config.top_margin_mm),
             self.config.setup_speed_mm_s,
         )
-        self._emit(act.PauseProgram(reason))
+        self._emit(act.PauseProgram(reason, cause))
         self._reply(False, reason)
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .clock import BoardClock, extend_u32
+from .clock import BoardClock, BoardTimeline, extend_u32
 from .errors import (
     BoardRebooted,
     LinkDown,
@@ -13,16 +13,18 @@ from .errors import (
 )
 from .session import BoardSession
 from .stats import LinkStats
-from .supervisor import LinkState, LinkSupervisor
+from .supervisor import LinkState, LinkStateChange, LinkSupervisor
 from .timing import LinkTiming
 
 __all__ = [
     "BoardClock",
     "BoardRebooted",
     "BoardSession",
+    "BoardTimeline",
     "LinkDown",
     "LinkError",
     "LinkState",
+    "LinkStateChange",
     "LinkStats",
     "LinkSupervisor",
     "LinkTiming",

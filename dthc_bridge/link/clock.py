@@ -1,15 +1,15 @@
-"""Board time to host time: 32-bit extension and a drift-tracking linear fit.
+"""Board time: the board's 32-bit microsecond stamps as one continuous clock.
 
-Each CLOCK reply is paired with the host times the query left and the reply arrived. The
-fit uses only samples whose round trip is close to the best seen, so a late reply (the
-event loop was busy) does not bend the mapping.
+The cut sequence and the THC run on the board's sample timestamps (two batches read
+together keep their true spacing), so the host needs no model of the board's clock, only
+two steps: extend each 32-bit stamp to 64 bits near the latest board time of the session
+(:class:`BoardClock`), and keep one timeline that never runs backwards across sessions,
+although a rebooted board counts from zero again (:class:`BoardTimeline`).
 """
 
 from __future__ import annotations
 
-from collections import deque
-
-__all__ = ["BoardClock", "extend_u32"]
+__all__ = ["BoardClock", "BoardTimeline", "extend_u32"]
 
 
 def extend_u32(t32: int, reference: int) -> int:
@@ -21,35 +21,10 @@ def extend_u32(t32: int, reference: int) -> int:
 
 
 class BoardClock:
-    def __init__(self, window: int = 16) -> None:
-        self._samples: deque[tuple[float, int, float]] = deque(maxlen=window)
-        self.last_board_us = 0
-        self.offset_s = 0.0  # host_time = board_us * 1e-6 * rate + offset_s
-        self.rate = 1.0
-        self.min_rtt_s = float("inf")
-        self.synced = False
+    """One session's board time in 64 bits (the board sends the low 32 bits, 71 minutes)."""
 
-    def observe(self, host_sent_s: float, host_received_s: float, board_us: int) -> None:
-        rtt = host_received_s - host_sent_s
-        self.last_board_us = max(self.last_board_us, board_us)
-        self.min_rtt_s = min(self.min_rtt_s, rtt)
-        self._samples.append(((host_sent_s + host_received_s) / 2, board_us, rtt))
-        good = [s for s in self._samples if s[2] <= self.min_rtt_s * 1.5 + 200e-6]
-        if len(good) >= 3:
-            n = len(good)
-            mb = sum(b for _, b, _ in good) / n
-            mh = sum(h for h, _, _ in good) / n
-            var = sum((b - mb) ** 2 for _, b, _ in good)
-            if var > 0:
-                cov = sum((b - mb) * (h - mh) for h, b, _ in good)
-                rate = cov / var * 1e6
-                if 0.999 < rate < 1.001:  # crystals are within hundreds of ppm
-                    self.rate = rate
-            self.offset_s = mh - mb * 1e-6 * self.rate
-        else:
-            h, b, _ = min(good or self._samples, key=lambda s: s[2])
-            self.offset_s = h - b * 1e-6 * self.rate
-        self.synced = True
+    def __init__(self) -> None:
+        self.last_board_us = 0
 
     def extend(self, t32: int) -> int:
         """A 32-bit board timestamp as a 64-bit one, near the latest board time seen."""
@@ -57,5 +32,34 @@ class BoardClock:
         self.last_board_us = max(self.last_board_us, t)
         return t
 
-    def to_host(self, board_us: int) -> float:
-        return board_us * 1e-6 * self.rate + self.offset_s
+
+class BoardTimeline:
+    """Board time in seconds, continuous over every session of one supervisor.
+
+    Within a session it is the board's own clock (plus a constant); when a new session
+    starts (a reconnect, or a reboot whose clock starts again at zero) the first stamp of
+    it is placed no earlier than the last stamp seen, so timers never run backwards.
+    """
+
+    def __init__(self) -> None:
+        self._offset_us = 0
+        self._last_us = 0
+        self._anchor_pending = False
+
+    def new_session(self) -> None:
+        """The next stamp comes from a new session: anchor the timeline on it."""
+        self._anchor_pending = True
+
+    def seconds(self, board_us: int) -> float:
+        """A session's 64-bit board stamp on the timeline, in seconds."""
+        if self._anchor_pending:
+            self._anchor_pending = False
+            self._offset_us = max(self._offset_us, self._last_us - board_us)
+        t_us = board_us + self._offset_us
+        self._last_us = max(self._last_us, t_us)
+        return t_us * 1e-6
+
+    @property
+    def now_s(self) -> float:
+        """The latest board time seen: when a command from the host takes effect."""
+        return self._last_us * 1e-6

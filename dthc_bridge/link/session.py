@@ -36,7 +36,8 @@ __all__ = ["BoardSession", "ReportCallback", "SamplesCallback"]
 log = structlog.get_logger("dthc_bridge.link")
 
 SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of sample 0
-ReportCallback = Callable[[fp.Message], None]  # EVENT, FAULT, MOTION_DONE, PROBE_RESULT
+# EVENT, FAULT, MOTION_DONE or PROBE_RESULT, and its 64-bit board time
+ReportCallback = Callable[[fp.Report, int], None]
 
 _REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
 _REPORT_REPLY = {fp.QueryWhat.PROBE_RESULT: fp.ProbeResult, fp.QueryWhat.MOTION_DONE: fp.MotionDone}
@@ -217,8 +218,7 @@ class BoardSession:
         self.boot_id = info.boot_id
         self.stats.handshakes += 1
         await self.request(fp.SetLease(0, self.timing.lease_ms))
-        for _ in range(4):
-            await self.sync_clock()
+        await self.sync_clock()
         status = await self.request(fp.Query(0, fp.QueryWhat.STATUS))
         assert isinstance(status, fp.Status)
         # Reports of events before this session are history: start counting from here. A
@@ -237,25 +237,21 @@ class BoardSession:
         return info
 
     async def sync_clock(self) -> None:
-        sent_s = self._loop.time()
+        """Learn the board's time, so the first SAMPLES stamps extend near it."""
         reply = await self.request(fp.ClockQuery(0))
         assert isinstance(reply, fp.Clock)
-        self.clock.observe(sent_s, self._loop.time(), reply.t_us)
 
     async def keep_alive(self) -> None:
-        """Renew the lease when idle and keep the clock mapping fresh, until the link dies."""
+        """Renew the lease when the host has been silent for a third of it, until the link
+        dies (the THC's Z velocity stream renews it while cutting)."""
         period = self.timing.heartbeat_period_s
-        next_sync = self._loop.time() + self.timing.clock_sync_period_s
         while not self.lost.done():
-            now = self._loop.time()
             idle_until = self._last_tx_s + period
-            if now >= next_sync:
-                next_sync = now + self.timing.clock_sync_period_s
-                await self._quietly(self.sync_clock())
-            elif now >= idle_until:
+            now = self._loop.time()
+            if now >= idle_until:
                 await self._quietly(self.request(fp.Heartbeat(0)))
             else:
-                await asyncio.wait({self.lost}, timeout=min(idle_until, next_sync) - now)
+                await asyncio.wait({self.lost}, timeout=idle_until - now)
 
     async def _quietly(self, work: Awaitable[object]) -> None:
         try:
@@ -319,10 +315,14 @@ class BoardSession:
             if not pending.future.done():
                 pending.future.set_result(msg)
             return
-        if isinstance(msg, fp.Event | fp.Fault) and not self._count_event(msg.counter):
-            return  # a FAULT re-report (same counter) or an older report: already handled
+        if isinstance(msg, fp.Event | fp.Fault):
+            if self.initial_status is None:
+                return  # before the handshake's STATUS: history, which STATUS summarises
+            if not self._count_event(msg.counter):
+                return  # a FAULT re-report (same counter) or an older report: already handled
         if self.on_report is not None:
-            self.on_report(msg)
+            assert isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult)
+            self.on_report(msg, self.clock.extend(msg.t_us))
 
     def _count_event(self, counter: int) -> bool:
         """Track the shared event counter; False for a report seen before."""

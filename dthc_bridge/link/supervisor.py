@@ -3,6 +3,12 @@
 A link fault never crashes the process: the session fails every waiter with one exception,
 the board is reported offline, and reconnection retries with capped, jittered backoff,
 including while the device path does not exist yet (USB cable still unplugged).
+
+The supervisor is also the link's boundary towards the layers above: they register
+listeners (samples, reports, state changes, handler errors), receive board data stamped
+with board time on one continuous timeline, and a listener that raises is caught here
+(DESIGN invariant 6): logged with its traceback, counted, and reported to the error
+listeners, while the transport and the session carry on.
 """
 
 from __future__ import annotations
@@ -11,17 +17,30 @@ import asyncio
 import contextlib
 import random
 from collections.abc import Callable
+from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import structlog
 
+import firmware_protocol as fp
+
 from ..transport import TransportError, TransportOpener, open_transport
+from .clock import BoardTimeline
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
-from .session import BoardSession, ReportCallback, SamplesCallback
+from .session import BoardSession
 from .stats import LinkStats
 from .timing import LinkTiming
 
-__all__ = ["LinkState", "LinkSupervisor", "StateCallback"]
+__all__ = [
+    "ErrorListener",
+    "LinkState",
+    "LinkStateChange",
+    "LinkSupervisor",
+    "ReportListener",
+    "SamplesListener",
+    "StateListener",
+]
 
 log = structlog.get_logger("dthc_bridge.link")
 
@@ -33,7 +52,17 @@ class LinkState(StrEnum):
     INCOMPATIBLE = "incompatible"
 
 
-StateCallback = Callable[[LinkState, str], None]  # new state, reason
+@dataclass(frozen=True, slots=True)
+class LinkStateChange:
+    state: LinkState
+    reason: str
+    board_rebooted: bool = False  # the session ended because the board restarted
+
+
+SamplesListener = Callable[[fp.Samples, float], None]  # batch, board time of sample 0 (s)
+ReportListener = Callable[[fp.Report, float], None]  # report, board time it happened (s)
+StateListener = Callable[[LinkStateChange], None]
+ErrorListener = Callable[[Exception], None]  # a listener raised while handling board data
 
 
 class LinkSupervisor:
@@ -44,30 +73,77 @@ class LinkSupervisor:
         *,
         baudrate: int = 921_600,
         opener: TransportOpener | None = None,
-        on_samples: SamplesCallback | None = None,
-        on_report: ReportCallback | None = None,
-        on_event_gap: Callable[[int], None] | None = None,
-        on_state: StateCallback | None = None,
         rng: random.Random | None = None,
     ) -> None:
         self.url = url
         self.timing = timing or LinkTiming()
         self.stats = LinkStats()
+        self.timeline = BoardTimeline()
         self._opener = opener or (
             lambda on_bytes, on_lost: open_transport(url, on_bytes, on_lost, baudrate=baudrate)
         )
-        self.on_samples = on_samples
-        self.on_report = on_report
-        self.on_event_gap = on_event_gap
-        self.on_state = on_state
+        self._samples_listeners: list[SamplesListener] = []
+        self._report_listeners: list[ReportListener] = []
+        self._gap_listeners: list[Callable[[int], None]] = []
+        self._state_listeners: list[StateListener] = []
+        self._error_listeners: list[ErrorListener] = []
         self.rng = rng or random.Random()
         self.state = LinkState.OFFLINE
         self.session: BoardSession | None = None
         self.last_error: str = ""
         self._online = asyncio.Event()
-        self._stopping = False
 
-    def _set_state(self, state: LinkState, reason: str) -> None:
+    # --- listeners -------------------------------------------------------------------------
+
+    def add_samples_listener(self, listener: SamplesListener) -> None:
+        """Every SAMPLES batch, on the hot path (called from the transport's read)."""
+        self._samples_listeners.append(listener)
+
+    def add_report_listener(self, listener: ReportListener) -> None:
+        """EVENT, FAULT, MOTION_DONE and PROBE_RESULT reports, each once."""
+        self._report_listeners.append(listener)
+
+    def add_event_gap_listener(self, listener: Callable[[int], None]) -> None:
+        """EVENT/FAULT reports were lost on the way (how many)."""
+        self._gap_listeners.append(listener)
+
+    def add_state_listener(self, listener: StateListener) -> None:
+        self._state_listeners.append(listener)
+
+    def add_error_listener(self, listener: ErrorListener) -> None:
+        """A listener raised while handling board data: the caller's fault path."""
+        self._error_listeners.append(listener)
+
+    def _notify(self, listeners: list[Callable[..., None]], *args: Any) -> None:
+        """Call each listener; a raising one is a bug above the link, never the link's end."""
+        for listener in listeners:
+            try:
+                listener(*args)
+            except Exception as exc:  # invariant 6: a bug is a fault, never the link's end
+                self.stats.handler_errors += 1
+                log.exception(
+                    "board_data_handler_failed",
+                    handler=getattr(listener, "__qualname__", repr(listener)),
+                    data=type(args[0]).__name__ if args else None,
+                )
+                for on_error in self._error_listeners:
+                    try:
+                        on_error(exc)
+                    except Exception:  # the fault path itself failed: log it, go on
+                        log.exception("board_data_error_handler_failed")
+
+    def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
+        self._notify(self._samples_listeners, batch, self.timeline.seconds(t0_board_us))
+
+    def _on_report(self, report: fp.Report, board_us: int) -> None:
+        self._notify(self._report_listeners, report, self.timeline.seconds(board_us))
+
+    def _on_event_gap(self, missed: int) -> None:
+        self._notify(self._gap_listeners, missed)
+
+    # --- state -----------------------------------------------------------------------------
+
+    def _set_state(self, state: LinkState, reason: str, *, board_rebooted: bool = False) -> None:
         if state is self.state and state is not LinkState.ONLINE:
             return
         self.state = state
@@ -76,8 +152,7 @@ class LinkSupervisor:
         else:
             self._online.clear()
         log.info("link_state", url=self.url, state=str(state), reason=reason)
-        if self.on_state is not None:
-            self.on_state(state, reason)
+        self._notify(self._state_listeners, LinkStateChange(state, reason, board_rebooted))
 
     async def wait_online(self, timeout_s: float | None = None) -> BoardSession:
         await asyncio.wait_for(self._online.wait(), timeout_s)
@@ -98,10 +173,11 @@ class LinkSupervisor:
         return ceiling * jitter
 
     async def _connect_once(self) -> BoardSession:
+        self.timeline.new_session()
         session = BoardSession(
             self.url, self.timing, self.stats,
-            on_samples=self.on_samples, on_report=self.on_report,
-            on_event_gap=self.on_event_gap,
+            on_samples=self._on_samples, on_report=self._on_report,
+            on_event_gap=self._on_event_gap,
         )  # fmt: skip
         try:
             await session.open(self._opener)
@@ -142,9 +218,10 @@ class LinkSupervisor:
                             await keep_alive
                     await session.close()
                     self.last_error = str(error)
-                    reason = "board_rebooted" if isinstance(error, BoardRebooted) else str(error)
-                    self._set_state(LinkState.OFFLINE, reason)
-                    if isinstance(error, BoardRebooted):
+                    rebooted = isinstance(error, BoardRebooted)
+                    reason = "board_rebooted" if rebooted else str(error)
+                    self._set_state(LinkState.OFFLINE, reason, board_rebooted=rebooted)
+                    if rebooted:
                         continue  # the board is there: re-handshake at once
                     failures = 1
                 await asyncio.sleep(self.backoff_s(failures))

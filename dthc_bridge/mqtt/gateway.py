@@ -513,9 +513,9 @@ class MqttGateway:
             iterator = self.controller.subscribe_events()
             try:
                 async for event in iterator:
-                    kind = str(event.get("type", "")) if isinstance(event, dict) else ""
+                    payload = encode_json(event.as_payload())
                     self._outbox.put(
-                        Outgoing(self.topics.event, encode_json(event), kind="event", label=kind)
+                        Outgoing(self.topics.event, payload, kind="event", label=event.type)
                     )
             except Exception:
                 log.exception("mqtt_event_stream_failed")

@@ -11,6 +11,8 @@ from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from ..events import ControllerEvent
+
 __all__ = ["CommandResult", "ControllerPort"]
 
 
@@ -58,6 +60,6 @@ class ControllerPort(Protocol):
         """The latest telemetry point, or None when there is none."""
         ...
 
-    def subscribe_events(self) -> AsyncIterator[dict[str, object]]:
-        """Events: {"type": "arc_lost"|"fault"|"pause"|"board_rebooted"|"link"|..., ...}."""
+    def subscribe_events(self) -> AsyncIterator[ControllerEvent]:
+        """Typed events (:mod:`dthc_bridge.events`), published as their ``as_payload()``."""
         ...

@@ -37,7 +37,7 @@ from typing import Any
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
-from dthc_tools.sim.closed_loop import ClosedLoop
+from dthc_tools.sim.closed_loop import BATCH_S, ClosedLoop
 from mock_device.plant import list_scenarios, load_scenario
 from mock_device.plant.truth import CutStats
 
@@ -72,7 +72,6 @@ CONTROLLERS = ("ours", "reference", "no_thc")
 RMS_RATIO_GOAL = 0.6
 THC_FEED_MM_MIN = 3000.0  # M667 F3000: 50 mm/s, as the controller tests use
 PIERCE_DELAY_MS = 300.0
-BATCH_S = 0.005  # ClosedLoop steps one 5-sample batch at 1 kHz
 TOUCH_FEED_MM_MIN = 300.0
 
 _WORD = re.compile(r"([A-Z])\s*([-+]?[0-9]*\.?[0-9]+)")
@@ -156,13 +155,11 @@ def plan_cuts(
 
 
 class BenchLoop(ClosedLoop):
-    """A ClosedLoop with a chosen THC, velocity reductions and lock-time accounting."""
+    """A ClosedLoop with a chosen THC and lock-time accounting."""
 
     def __init__(self, scenario: str, seed: int, thc: ThcController) -> None:
         super().__init__(scenario, seed=seed)
-        self.seq.thc = thc
-        # Reduced feed (µm/s) -> the programmed feed the sender keeps reporting (mm/s).
-        self.reductions: dict[int, float] = {}
+        self.sequence.thc = thc
         self.cutting_s = 0.0
         self.locked_s = 0.0
         self.lock_s: dict[str, float] = {}
@@ -171,21 +168,19 @@ class BenchLoop(ClosedLoop):
         # while the gantry moves in CUTTING: where the error comes from.
         self.phase_err: dict[str, list[float]] = {}
 
-    def step(self) -> None:
-        requested = self.plant.gantry.requested_feed_mm_s
-        self.requested_override_mm_s = self.reductions.get(round(requested * 1000))
-        before = self.now
-        super().step()
-        if self.seq.state is State.CUTTING:
-            batch_s = self.now - before
+    def _record(self) -> None:
+        super()._record()
+        sequence = self.sequence
+        if sequence.state is State.CUTTING:
+            batch_s = BATCH_S
             self.cutting_s += batch_s
-            locks = self.seq.thc.locks(self.now)
+            locks = sequence.thc.locks(sequence.now)
             if locks:
                 self.locked_s += batch_s
             for lock in locks:
                 self.lock_s[str(lock)] = self.lock_s.get(str(lock), 0.0) + batch_s
             if self.plant.gantry.speed_mm_s > 0.0:
-                phase = _phase(locks, self.seq.thc.slow_target_v is not None)
+                phase = _phase(locks, sequence.thc.slow_target_v is not None)
                 acc = self.phase_err.setdefault(phase, [0.0, 0.0])
                 acc[0] += 1
                 acc[1] += (self.plant.true_height_mm - self.cut_height_mm) ** 2
@@ -261,9 +256,9 @@ def run_controller(
     """Run every planned cut of ``scenario`` with one controller; ground truth per cut."""
     loop = BenchLoop(scenario, seed, make_thc(kind, reference or ReferenceConfig(), ours))
     material = load_scenario(scenario).material
-    seq = loop.seq
-    seq.plasma_mode = True
-    seq.set_params(
+    sequence = loop.sequence
+    sequence.plasma_mode = True
+    sequence.set_params(
         CutParams(
             touch_feed_mm_min=TOUCH_FEED_MM_MIN,
             pierce_height_mm=material.pierce_height_mm,
@@ -273,31 +268,30 @@ def run_controller(
             ohmic=True,
         )
     )
-    seq.set_thc(kind != "no_thc", THC_FEED_MM_MIN)
+    sequence.set_thc(kind != "no_thc", THC_FEED_MM_MIN)
     gantry = loop.plant.gantry
     gantry.feed_line("G21 G90")
     result = ControllerResult(planned_cuts=len(plans))
     for plan in plans:
-        if plan.slow_feed_mm_min is not None and plan.programmed_feed_mm_min is not None:
-            loop.reductions[round(plan.slow_feed_mm_min / 60.0 * 1000)] = (
-                plan.programmed_feed_mm_min / 60.0
-            )
         gantry.feed_line(plan.approach)
         if not loop.run_until(lambda: gantry.idle, 60.0):
             result.errors.append("approach did not finish")
             break
+        # The slowed tail runs at the reduced feed while the sender keeps reporting the
+        # programmed one (a PlasmaC M67 E3 velocity reduction).
+        loop.reported_feed_mm_min = plan.programmed_feed_mm_min if plan.slow else None
         started = loop.m3()
         ok = started.ok and loop.move(*plan.lines, *plan.slow, max_s=600.0)
         ended = loop.m5()
         if ok and ended.ok:
             result.completed_cuts += 1
         else:
-            result.errors.append(started.error or seq.error or ended.error or "cut incomplete")
+            result.errors.append(started.error or sequence.error or ended.error or "cut incomplete")
             gantry.clear()
             gantry.resume()
-            seq.rearm(loop.now)
-            loop.execute(seq.drain())
+            loop.request("rearm")
             loop.run_until(lambda: loop.plant.zaxis.is_idle, 10.0)
+    loop.close()
     result.cuts = list(loop.plant.truth.summary().cuts)
     result.cutting_s = loop.cutting_s
     result.locked_s = loop.locked_s

@@ -127,18 +127,17 @@ class TimedClient(BoardClient):
     def finish_wiring(self) -> None:
         self.add_listener(self._unmark)
 
-    def _mark(self, item: Telemetry) -> None:
+    def _mark(self, item: Telemetry, t_s: float) -> None:
         if type(item) is fp.Samples:
             self._batch = item
             self.last_batch = item
             if self.recording:
-                t_last = item.t0_us + item.period_us * (len(item.samples_cv) - 1)
-                self._t_last_us = extend_u32(t_last & 0xFFFFFFFF, self._t_last_us)
+                self._t_last_us = extend_u32(item.t_last_us, self._t_last_us)
                 self.batches.append(
                     (item.stream_seq, self._t_last_us, item.zvel_seq, len(item.samples_cv))
                 )
 
-    def _unmark(self, item: Telemetry) -> None:
+    def _unmark(self, item: Telemetry, t_s: float) -> None:
         self._batch = None
 
     def z_velocity(self, velocity_mm_s: float, expiry_ms: int | None = None) -> None:
@@ -159,15 +158,15 @@ class Rig:
     tasks: list[asyncio.Task[None]] = field(default_factory=list)
 
     @property
-    def seq(self) -> CutSequence:
-        return self.service.seq
+    def sequence(self) -> CutSequence:
+        return self.service.sequence
 
     def thc_active(self) -> bool:
-        seq = self.seq
+        sequence = self.sequence
         return (
-            seq.state is State.CUTTING
-            and seq.thc.target_v is not None
-            and not seq.thc.locks(self.service.now)
+            sequence.state is State.CUTTING
+            and sequence.thc.target_v is not None
+            and not sequence.thc.locks(self.service.now)
         )
 
     async def close(self) -> None:
@@ -231,7 +230,7 @@ async def start_cut(rig: Rig, scenario: str, timeout_s: float = 30.0) -> None:
     end = loop.time() + timeout_s
     while not rig.thc_active():
         if loop.time() > end:
-            raise RuntimeError(f"THC not active within {timeout_s} s: {rig.seq.snapshot()}")
+            raise RuntimeError(f"THC not active within {timeout_s} s: {rig.sequence.snapshot()}")
         await asyncio.sleep(0.01)
 
 
@@ -576,7 +575,7 @@ async def _measure_pty_link(
         usage1 = resource.getrusage(resource.RUSAGE_SELF)
         mock_cpu1 = proc_cpu_s(mock_pid)
         rss_kb, hwm_kb = _status_kb("VmRSS"), _status_kb("VmHWM")
-        state = str(rig.seq.state)
+        state = str(rig.sequence.state)
         with contextlib.suppress(Exception):
             await asyncio.wait_for(rig.service.execute_gcode("M5"), 10.0)
     finally:
@@ -775,7 +774,7 @@ async def measure_in_process(
         link.stop_board()
         await link.ticker
         last = rig.client.last_batch
-        target = rig.seq.thc.target_v
+        target = rig.sequence.thc.target_v
         assert last is not None
         assert target is not None
         for batch in batches:

@@ -1,25 +1,64 @@
-"""The cut sequence and THC closing the loop over a SimulatedBoard, in simulated time.
+"""The daemon's controller service closing the loop over a simulated board, in simulated time.
 
-No asyncio and no wall clock: each step advances the board by one sample batch, feeds
-what the board sent to the sequence, and executes the sequence's actions as protocol
-commands. The "sender" runs the gantry of the plant: M3 is sent, motion starts when M3
-is answered, M5 is sent when the motion queue is empty.
+Not a model of the daemon: the daemon itself. A :class:`~dthc_bridge.service.ControllerService`
+built as ``dthc-bridge run`` builds it (:func:`~dthc_bridge.daemon.build_controller` on a
+default :class:`~dthc_bridge.config.DaemonConfig`), its :class:`~dthc_bridge.link.LinkSupervisor`
+and :class:`~dthc_bridge.board.BoardClient`, talk the wire protocol to a
+:class:`~mock_device.sim.SimulatedBoard` over :class:`~.link.SimulatedLink`. So the
+actions-to-protocol and reports-to-sequence mappings the benchmarks measure are the
+daemon's own.
+
+Time is simulated twice over, in step: the board advances one sample batch per step, and
+the daemon's event loop is a ``looptime`` loop whose clock jumps ahead instead of sleeping,
+so seconds of cutting take milliseconds and every run repeats exactly. The API is
+synchronous (each call runs the loop until its condition holds), for tests and benchmarks.
+
+The "sender" is the harness: motion goes to the plant's gantry; plasma lines and the
+motion lines' feeds go to the service as G-code, as the reference sender sends them; a
+pause from the daemon holds the gantry.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import functools
+import threading
+import weakref
+from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
-import firmware_protocol as fp
-from dthc_bridge.controller import actions as act
-from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State, with_board_limits
-from dthc_bridge.controller.thc import ThcConfig, ThcController
-from dthc_bridge.service import feed_samples
+import looptime
+
+from dthc_bridge.board import BoardClient
+from dthc_bridge.config import DaemonConfig
+from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State
+from dthc_bridge.controller.thc import ThcConfig
+from dthc_bridge.daemon import build_controller
+from dthc_bridge.events import ArcLost, ControllerEvent, ProgramPaused
+from dthc_bridge.link import LinkSupervisor
+from dthc_bridge.mqtt.port import CommandResult
+from dthc_bridge.service import ControllerService
+from dthc_bridge.transport import BytesCallback, LostCallback, Transport
 from mock_device.sim import SimulatedBoard
-from mock_device.sim_host import SimHost
 
-SENSORS_OHMIC = 1 << fp.InputBit.OHMIC
-SENSORS_FLOAT = 1 << fp.InputBit.FLOAT
+from .link import SimulatedLink
+
+__all__ = ["BATCH_S", "ClosedLoop", "Reply", "Trace"]
+
+BATCH_S = 0.005  # one step: a 5-sample batch at 1 kHz, the board's default
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class Reply:
+    """The daemon's answer to one G-code line or request."""
+
+    command: str  # "M3", "M5", ... for deferred commands; else the line or request name
+    ok: bool
+    error: str = ""
+    data: dict[str, object] = field(default_factory=dict)
 
 
 @dataclass
@@ -27,159 +66,251 @@ class Trace:
     state: list[str] = field(default_factory=list)  # the sequence state after each step
 
 
+class _Runtime:
+    """The event loop, its tasks and what the daemon's callbacks write to. Nothing here
+    refers back to the ClosedLoop, so a dropped ClosedLoop is collected and its loop closed
+    (``weakref.finalize``) instead of living, with its plant, until the process ends."""
+
+    def __init__(self, board: SimulatedBoard) -> None:
+        # One no-op cycle before the clock jumps: enough for tasks woken in the same
+        # instant to run first, and cheap (the default 42 would dominate the step cost).
+        self.loop: asyncio.AbstractEventLoop = looptime.new_event_loop(noop_cycles=1)
+        self.tasks: list[asyncio.Task[Any]] = []
+        self.board = board
+        self.link: SimulatedLink | None = None
+        self.replies: list[Reply] = []
+        self.pauses: list[str] = []
+        self.events: list[ControllerEvent] = []
+
+    async def open_link(self, on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
+        self.link = SimulatedLink(self.board, on_bytes, on_lost)
+        return self.link
+
+    def on_event(self, event: ControllerEvent) -> None:
+        self.events.append(event)
+        if isinstance(event, ArcLost | ProgramPaused):
+            self.pauses.append(event.reason)
+            self.board.plant.gantry.hold()  # what the sender does with a pause
+
+    def note_reply(self, what: str, task: asyncio.Task[CommandResult]) -> None:
+        if task.cancelled():
+            return
+        result = task.result()
+        command = str(result.data.get("command", what))
+        self.replies.append(Reply(command, result.ok, result.error, dict(result.data)))
+
+    def close(self) -> None:
+        if self.loop.is_closed():
+            return
+        try:
+            asyncio.get_running_loop()
+        except RuntimeError:
+            self._shut_down()
+        else:  # collected while another loop runs in this thread: ours runs in another
+            worker = threading.Thread(target=self._shut_down, name="closed-loop-close")
+            worker.start()
+            worker.join()
+
+    def _shut_down(self) -> None:
+        loop = self.loop
+        # Every task of the loop (the service's completions too), cancelled again while one
+        # lingers: a cancellation can be lost where a wait and its result race (3.11's
+        # wait_for). Bounded, in simulated time: nothing here waits for the real world.
+        for _ in range(10):
+            pending = [task for task in asyncio.all_tasks(loop) if not task.done()]
+            if not pending:
+                break
+            for task in pending:
+                task.cancel()
+            loop.run_until_complete(asyncio.wait(pending, timeout=1.0))
+        loop.run_until_complete(loop.shutdown_asyncgens())
+        loop.close()
+
+
 class ClosedLoop:
     def __init__(
         self,
         scenario: str = "flat_clean",
         seed: int = 1,
+        *,
         config: SequenceConfig | None = None,
         thc: ThcConfig | None = None,
         board: SimulatedBoard | None = None,
+        daemon_config: DaemonConfig | None = None,
     ) -> None:
         self.board = board or SimulatedBoard(scenario, seed=seed)
         self.plant = self.board.plant
-        self.host = SimHost(self.board)
-        info = self.host.open_session(lease_ms=250)
-        z = (info.z_min_um / 1000, info.z_max_um / 1000)
-        self.seq = CutSequence(
-            with_board_limits(config or SequenceConfig(), *z), ThcController(thc)
-        )
-        self.moves: dict[int, int] = {}
-        self.replies: list[act.CommandReply] = []
-        self.pauses: list[str] = []
-        self.velocity_stream = 0
-        self.last_tx_s = 0.0
+        self.daemon_config = daemon_config or DaemonConfig()
         self.trace = Trace()
-        self.velocities: list[float] = []
-        # The programmed feed the sender reports, when it differs from what the gantry runs
-        # (a PlasmaC M67 E3 velocity reduction slows the machine, not the reference).
-        self.requested_override_mm_s: float | None = None
+        # The feed (mm/min) the sender reports for the motion it sends, when it differs
+        # from what the gantry runs (a PlasmaC M67 E3 velocity reduction slows the
+        # machine, not the reference).
+        self.reported_feed_mm_min: float | None = None
+        self._runtime = _Runtime(self.board)
+        self.replies = self._runtime.replies
+        self.pauses = self._runtime.pauses
+        self.events = self._runtime.events
+        weakref.finalize(self, self._runtime.close)
+        self._run(self._start(config, thc))
+
+    # --- wiring ----------------------------------------------------------------------------
+
+    async def _start(self, config: SequenceConfig | None, thc: ThcConfig | None) -> None:
+        daemon = self.daemon_config
+        controller = build_controller(daemon)
+        sequence = controller.sequence
+        if config is not None:
+            sequence.config = config
+        if thc is not None:
+            sequence.thc.config = thc
+        runtime = self._runtime
+        self.supervisor = LinkSupervisor(
+            "sim://board", daemon.board.timing(), opener=runtime.open_link
+        )
+        self.client = BoardClient(self.supervisor)
+        self.service = ControllerService(controller, self.supervisor, self.client)
+        self.service.add_event_listener(runtime.on_event)
+        loop = asyncio.get_running_loop()
+        self._runtime.tasks += [
+            loop.create_task(self.supervisor.run(), name="link"),
+            loop.create_task(self.service.run(), name="controller"),
+        ]
+        await self.supervisor.wait_online(5.0)
+
+    def close(self) -> None:
+        self._runtime.close()
+
+    def __enter__(self) -> ClosedLoop:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # --- what the daemon runs --------------------------------------------------------------
+
+    @property
+    def sequence(self) -> CutSequence:
+        return self.service.sequence
+
+    @property
+    def velocities(self) -> list[float]:
+        """Every Z velocity (mm/s) the daemon sent the board."""
+        link = self._runtime.link
+        return link.velocities_mm_s if link is not None else []
 
     @property
     def now(self) -> float:
         return self.board.t_s
 
-    def execute(self, actions: list[act.Action]) -> None:
-        for a in actions:
-            self._execute(a)
+    def pump(self) -> None:
+        """After poking the sequence directly: hand its actions to the service."""
+        self.service.pump()
 
-    def _request(self, msg: fp.Message, action: act.Action) -> fp.Message | None:
-        reply = self.host.request(msg)
-        self.last_tx_s = self.now
-        if isinstance(reply, fp.Nak):
-            self.seq.on_action_failed(action, f"NAK {fp.NakCode(reply.code).name}")
-            return None
-        return reply
+    # --- time ------------------------------------------------------------------------------
 
-    def _execute(self, a: act.Action) -> None:
-        if isinstance(a, act.Torch):
-            self._request(fp.Torch(0, a.on), a)
-        elif isinstance(a, act.OhmicSense):
-            self._request(fp.OhmicSense(0, a.on), a)
-        elif isinstance(a, act.MoveZ):
-            reply = self._request(
-                fp.ZMove(0, round(a.target_mm * 1000), round(a.feed_mm_s * 1000)), a
-            )
-            if reply is not None:
-                self.moves[reply.seq] = a.token
-        elif isinstance(a, act.ProbeZ):
-            sensors = (SENSORS_OHMIC if a.ohmic else 0) | (SENSORS_FLOAT if a.float_switch else 0)
-            self._request(
-                fp.ZProbe(0, round(a.feed_mm_s * 1000), round(a.max_travel_mm * 1000), sensors), a
-            )
-        elif isinstance(a, act.ZVelocity):
-            self.velocity_stream = (self.velocity_stream + 1) & 0xFFFF
-            self.host.send(
-                fp.ZVelocity(0, self.velocity_stream, round(a.velocity_mm_s * 1000), 20), seq=0
-            )
-            self.last_tx_s = self.now
-            self.velocities.append(a.velocity_mm_s)
-        elif isinstance(a, act.StopZ):
-            self._request(fp.ZStop(0), a)
-        elif isinstance(a, act.ResetFaults):
-            self._request(fp.FaultReset(0, 0xFFFF), a)
-        elif isinstance(a, act.SetCurrent):
-            self._request(fp.SetCurrent(0, round(a.current_a * 10)), a)
-        elif isinstance(a, act.CommandReply):
-            self.replies.append(a)
-        elif isinstance(a, act.PauseProgram):
-            self.pauses.append(a.reason)
-            self.plant.gantry.hold()
+    def _run(self, work: Coroutine[Any, Any, _T]) -> _T:
+        return self._runtime.loop.run_until_complete(work)
 
     def step(self) -> None:
         """One sample batch of board time."""
-        self.board.advance_ms(5)
-        for m in self.host.collect():
-            self._feed(m)
-        self.seq.tick(self.now)
-        self.execute(self.seq.drain())
-        if self.now - self.last_tx_s > 0.05:
-            self.host.request(fp.Heartbeat(0))
-            self.last_tx_s = self.now
-        self._record()
+        self.run_until(lambda: False, BATCH_S)
 
-    def _feed(self, m: fp.Message) -> None:
-        seq = self.seq
-        now = self.now
-        if isinstance(m, fp.Samples):
-            requested = (
-                self.requested_override_mm_s or self.plant.gantry.requested_feed_mm_s or None
-            )
-            feed_samples(seq, m, requested, now)
-        elif isinstance(m, fp.Event):
-            seq.on_inputs(m.inputs, m.z_um / 1000, now)
-        elif isinstance(m, fp.MotionDone):
-            token = self.moves.pop(m.seq, None)
-            if token is not None:
-                seq.on_motion_done(token, m.result == fp.MotionResult.REACHED, m.z_um / 1000)
-        elif isinstance(m, fp.ProbeResult):
-            seq.on_probe_done(
-                m.result == fp.ProbeOutcome.CONTACT, bool(m.sensor & SENSORS_OHMIC),
-                m.contact_z_um / 1000, m.stop_z_um / 1000,
-            )  # fmt: skip
-        elif isinstance(m, fp.Fault):
-            seq.on_board_fault(fp.FaultCode(m.code).name)
-        self.execute(seq.drain())
+    def run_until(self, done: Callable[[], bool], max_s: float) -> bool:
+        """Step until ``done()`` holds (True) or ``max_s`` of board time passed (False)."""
+        return self._run(self._run_until(done, max_s))
 
-    def _record(self) -> None:
-        self.trace.state.append(str(self.seq.state))
-
-    def run_until(self, done: object, max_s: float) -> bool:
-        assert callable(done)
-        end = self.now + max_s
+    async def _run_until(self, done: Callable[[], bool], max_s: float) -> bool:
+        await _settle()
+        end = self.now + max_s - 1e-9
         while self.now < end:
-            self.step()
+            self.board.advance_ms(BATCH_S * 1000)
+            link = self._runtime.link
+            if link is not None:
+                link.deliver()  # the service's hot path runs in here
+            await asyncio.sleep(BATCH_S)
+            self._record()
             if done():
                 return True
         return False
 
+    def _record(self) -> None:
+        """After each step: subclasses account what they measure."""
+        self.trace.state.append(str(self.sequence.state))
+
+    def complete(self, work: Awaitable[_T], max_s: float = 30.0) -> _T:
+        """Run ``work`` on the daemon's loop while the board steps, until it completes."""
+        task = self._runtime.loop.create_task(_awaited(work))
+        self._run(_settle())
+        if not task.done() and not self.run_until(task.done, max_s):
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                self._run(_awaited(task))
+            raise TimeoutError(f"not completed within {max_s} s of board time")
+        return task.result()
+
     # --- the sender's side -----------------------------------------------------------------
 
-    def m3(self, max_s: float = 20.0) -> act.CommandReply:
-        before = len(self.replies)
-        self.seq.start(self.now, (self.plant.gantry.x_mm, self.plant.gantry.y_mm))
-        self.execute(self.seq.drain())
-        assert self.run_until(lambda: len(self.replies) > before, max_s), self.seq.state
-        return self.replies[before]
+    def submit(self, line: str, line_number: int | None = None) -> asyncio.Task[CommandResult]:
+        """Send a G-code line to the daemon without waiting; its reply lands in ``replies``."""
+        xy = (self.plant.gantry.x_mm, self.plant.gantry.y_mm)
+        task = self._runtime.loop.create_task(
+            self.service.execute_gcode(line, line_number=line_number, xy_mm=xy)
+        )
+        task.add_done_callback(functools.partial(self._runtime.note_reply, line))
+        return task
 
-    def m5(self, max_s: float = 10.0) -> act.CommandReply:
+    def gcode(self, line: str, line_number: int | None = None, max_s: float = 30.0) -> Reply:
+        """Send a G-code line and run until the daemon answers it."""
         before = len(self.replies)
-        self.seq.stop(self.now, (self.plant.gantry.x_mm, self.plant.gantry.y_mm))
-        self.execute(self.seq.drain())
-        assert self.run_until(lambda: len(self.replies) > before, max_s), self.seq.state
-        return self.replies[before]
+        task = self.submit(line, line_number)
+        assert self.run_until(task.done, max_s), (line, self.sequence.state)
+        assert len(self.replies) == before + 1
+        return self.replies[-1]
+
+    def request(self, name: str, max_s: float = 30.0, **args: object) -> Reply:
+        """A named request (``rearm``, ``cycle_start``, ``ohmic_test``, ...)."""
+        result = self.complete(self.service.execute_request(name, args), max_s)
+        return Reply(name, result.ok, result.error, dict(result.data))
+
+    def submit_request(self, name: str, **args: object) -> asyncio.Task[CommandResult]:
+        """Send a named request without waiting (not recorded in ``replies``)."""
+        return self._runtime.loop.create_task(self.service.execute_request(name, args))
+
+    def m3(self, max_s: float = 20.0) -> Reply:
+        return self.gcode("M3", max_s=max_s)
+
+    def m5(self, max_s: float = 10.0) -> Reply:
+        return self.gcode("M5", max_s=max_s)
 
     def move(self, *lines: str, max_s: float = 60.0) -> bool:
-        """Run motion lines on the gantry; False if the cut faulted (the sender paused)."""
+        """Run motion lines on the gantry; False if the cut faulted (the sender paused).
+
+        The daemon is sent each line as well (its feed is the anti-dive reference), or
+        ``reported_feed_mm_min`` when the sender reports a feed other than the one run."""
         for line in lines:
             self.plant.gantry.feed_line(line)
+            self.submit(line)
+        if self.reported_feed_mm_min is not None:
+            self.submit(f"G1 F{self.reported_feed_mm_min:g}")
         return (
-            self.run_until(lambda: self.plant.gantry.idle or self.seq.state is State.FAULTED, max_s)
-            and self.seq.state is not State.FAULTED
+            self.run_until(
+                lambda: self.plant.gantry.idle or self.sequence.state is State.FAULTED, max_s
+            )
+            and self.sequence.state is not State.FAULTED
         )
 
-    def cut(self, *lines: str) -> tuple[act.CommandReply, bool, act.CommandReply]:
+    def cut(self, *lines: str) -> tuple[Reply, bool, Reply]:
         started = self.m3()
         ok = started.ok and self.move(*lines)
         ended = self.m5()
         return started, ok, ended
+
+
+async def _awaited(work: Awaitable[_T]) -> _T:
+    return await work
+
+
+async def _settle() -> None:
+    """Let what was just submitted (a command, a pumped action) reach the board first."""
+    for _ in range(3):
+        await asyncio.sleep(0)

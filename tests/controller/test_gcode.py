@@ -25,7 +25,7 @@ from dthc_bridge.controller.commands import (
     PlasmaMode,
     ProbeAndStart,
     ResumePoint,
-    SetCurrent,
+    SelectCurrent,
     SetCutParams,
     ThcEnable,
     ThcMode,
@@ -39,7 +39,9 @@ from dthc_bridge.controller.gcode import REQUEST_NAMES, ParsedLine, parse_line, 
 
 SEEDS = Path("/work/shared/seeds")
 MASSO_SEED = SEEDS / "000_4b3df242e51ae6b5.txt"
-VENDORED_SAMPLE = Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs" / "masso_sample.ngc"
+VENDORED_SAMPLE = (
+    Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs" / "masso_sample.ngc"
+)
 
 
 def commands(line: str, **kwargs: int | None) -> tuple[Command, ...]:
@@ -245,8 +247,8 @@ def test_g100_p0_is_a_resume_point_at_the_senders_line() -> None:
 
 def test_g100_p4_sets_the_plasma_current() -> None:
     """P4 A<amperes> is the current set point."""
-    assert commands("G100 P4 A45") == (SetCurrent(45.0),)
-    assert commands("G100 P4 A400") == (SetCurrent(400.0),)
+    assert commands("G100 P4 A45") == (SelectCurrent(45.0),)
+    assert commands("G100 P4 A400") == (SelectCurrent(400.0),)
 
 
 @pytest.mark.parametrize(

@@ -6,12 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.commands import CommandError
 from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.controller.sequence import State
-from dthc_tools.sim.closed_loop import ClosedLoop
+from dthc_tools.sim.closed_loop import ClosedLoop, Reply
 
 PROGRAMS = Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs"
 
@@ -21,28 +20,23 @@ class Sender:
 
     def __init__(self, loop: ClosedLoop) -> None:
         self.loop = loop
-        self.controller = PlasmaController(loop.seq)
         self.errors: list[str] = []
 
     def run(self, lines: list[str]) -> None:
         loop = self.loop
         for number, line in enumerate(lines, start=1):
             parsed = parse_line(line, line_number=number)
-            for command in parsed.commands:
+            if parsed.commands:
                 # Plasma words act in program order: after the motion queued before them.
                 loop.run_until(lambda: loop.plant.gantry.idle, 60)
-                before = len(loop.replies)
-                xy = (loop.plant.gantry.x_mm, loop.plant.gantry.y_mm)
-                outcome = self.controller.handle(command, loop.now, xy)
-                loop.execute(loop.seq.drain())
-                if outcome.deferred:
-                    assert loop.run_until(lambda b=before: len(loop.replies) > b, 30)
-                    reply = loop.replies[-1]
-                    if not reply.ok:
-                        self.errors.append(reply.error)
-                        return
+                reply = loop.gcode(line, number)
+                if not reply.ok:
+                    self.errors.append(reply.error)
+                    return
             if parsed.motion and not parsed.motion.startswith(("G21", "G17", "G90", "G80", "G94")):
                 loop.plant.gantry.feed_line(parsed.motion)
+                if not parsed.commands:
+                    loop.submit(line, number)  # the daemon reads the feed (anti-dive)
         loop.run_until(lambda: loop.plant.gantry.idle, 60)
 
 
@@ -56,9 +50,9 @@ def test_the_masso_sample_program_runs_from_start_to_end() -> None:
     sender = Sender(loop)
     sender.run(masso_sample())
     assert sender.errors == []
-    assert loop.seq.state is State.IDLE
-    assert loop.seq.params.cut_height_mm == pytest.approx(3.5)
-    assert loop.seq.params.cut_voltage_v == 116.0
+    assert loop.sequence.state is State.IDLE
+    assert loop.sequence.params.cut_height_mm == pytest.approx(3.5)
+    assert loop.sequence.params.cut_voltage_v == 116.0
     m3 = [r for r in loop.replies if r.command == "M3"]
     m5 = [r for r in loop.replies if r.command == "M5"]
     assert len(m3) == len(m5) >= 2
@@ -82,8 +76,8 @@ def test_rosetta_g100_program_probes_starts_and_enables_the_comparator() -> None
         "G1 X300 Y50 F5500", "G1 X300 Y120", "G100 P7 A0", "M5", "G100 P0",
     ])  # fmt: skip
     assert sender.errors == []
-    assert [p.index for p in sender.controller.resume_points] == [0, 1]
-    assert loop.seq.thc.target_v == pytest.approx(125.0)
+    assert [p.index for p in loop.service.controller.resume_points] == [0, 1]
+    assert loop.sequence.thc.target_v == pytest.approx(125.0)
     cut = loop.plant.truth.summary().cuts[0]
     assert cut.dives == 0
     assert cut.height_rms_error_mm < 0.15  # includes the THC delay at the float-probed height
@@ -95,27 +89,27 @@ def test_plasmac_thc_and_velocity_reduction_lines() -> None:
     for line in ("M65 P2", "M67 E3 Q60"):
         for command in parse_line(line).commands:
             controller.handle(command, 0.0)
-    assert controller.seq.thc_enabled
-    assert controller.seq.velocity_percent == 60.0
+    assert controller.sequence.thc_enabled
+    assert controller.sequence.velocity_percent == 60.0
     for command in parse_line("M64 P2").commands:
         controller.handle(command, 0.0)
-    assert not controller.seq.thc_enabled
+    assert not controller.sequence.thc_enabled
 
 
 def test_refusals_change_nothing() -> None:
     """Leaving plasma mode mid-cut, or re-arming with nothing to re-arm, is refused cleanly."""
     loop = ClosedLoop("flat_clean", seed=5)
-    controller = PlasmaController(loop.seq)
+    controller = loop.service.controller
     for line in ("T112 M6", "G200 F300 P3.8 D300 C1.5 V125 A90 O1 S0"):
         for command in parse_line(line).commands:
             controller.handle(command, loop.now)
     assert loop.m3().ok
     with pytest.raises(CommandError, match="plasma mode"):
         controller.handle(parse_line("T1 M6").commands[0], loop.now)
-    assert loop.seq.plasma_mode
-    assert loop.seq.state is State.CUTTING
+    assert loop.sequence.plasma_mode
+    assert loop.sequence.state is State.CUTTING
     from dthc_bridge.controller.commands import Rearm
 
     with pytest.raises(CommandError, match="re-arm"):
         controller.handle(Rearm(), loop.now)
-    assert isinstance(loop.m5(), act.CommandReply)
+    assert isinstance(loop.m5(), Reply)

@@ -34,9 +34,9 @@ def ready(
         "ohmic": True,
     }
     base.update(params)
-    loop.seq.plasma_mode = True
-    loop.seq.set_params(CutParams(**base))  # type: ignore[arg-type]  # keyword test data
-    loop.seq.set_thc(True, 3000)
+    loop.sequence.plasma_mode = True
+    loop.sequence.set_params(CutParams(**base))  # type: ignore[arg-type]  # keyword test data
+    loop.sequence.set_thc(True, 3000)
     loop.plant.gantry.feed_line("G0 X50 Y50")
     assert loop.run_until(lambda: loop.plant.gantry.idle, 10)
     return loop
@@ -49,11 +49,11 @@ def test_a_full_cut_probes_pierces_cuts_and_returns_to_safe_height() -> None:
     assert started.ok
     assert ok
     assert ended.ok
-    assert loop.seq.state is State.IDLE
+    assert loop.sequence.state is State.IDLE
     assert not loop.plant.torch_on
-    assert loop.seq.cut is not None
-    assert loop.seq.cut.zero_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.05)
-    assert loop.plant.zaxis.position_mm == pytest.approx(loop.seq.safe_z_mm, abs=0.01)
+    assert loop.sequence.cut is not None
+    assert loop.sequence.cut.zero_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.05)
+    assert loop.plant.zaxis.position_mm == pytest.approx(loop.sequence.safe_z_mm, abs=0.01)
     cut = loop.plant.truth.summary().cuts[0]
     assert cut.height_rms_error_mm < 0.1
     assert cut.dives == 0
@@ -73,7 +73,7 @@ def test_painted_plate_retries_ohmic_then_falls_back_to_the_float_switch() -> No
     """Ohmic never contacts on paint: one retry, then the float switch's travel-corrected zero."""
     loop = ready("painted_plate")
     assert loop.m3().ok
-    cut = loop.seq.cut
+    cut = loop.sequence.cut
     assert cut is not None
     assert cut.ohmic_failed == 1
     assert cut.zero_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.15)
@@ -82,14 +82,16 @@ def test_painted_plate_retries_ohmic_then_falls_back_to_the_float_switch() -> No
 def test_no_arc_after_three_attempts_faults_and_pauses_the_sender() -> None:
     """A pilot that never transfers (pierce too high): 3 attempts, then the fault path."""
     loop = ready(pierce_height_mm=9.5, cut_height_mm=1.5)
-    loop.seq.config = replace(loop.seq.config, arc_ok_timeout_s=0.5, arc_retry_delay_s=0.2)
+    loop.sequence.config = replace(
+        loop.sequence.config, arc_ok_timeout_s=0.5, arc_retry_delay_s=0.2
+    )
     reply = loop.m3(max_s=30)
     assert not reply.ok
     assert "no arc OK after 3" in reply.error
-    assert loop.seq.state is State.FAULTED
+    assert loop.sequence.state is State.FAULTED
     assert loop.pauses
     assert not loop.plant.torch_on
-    assert loop.seq.probe_required
+    assert loop.sequence.probe_required
 
 
 def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
@@ -97,17 +99,16 @@ def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
     loop = ready("arc_lost_midcut")
     assert loop.m3().ok
     assert not loop.move("G1 X1000 Y50 F4000", max_s=30)
-    assert loop.seq.error == "arc lost"
+    assert loop.sequence.error == "arc lost"
     assert loop.pauses == ["arc lost"]
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
     assert not loop.plant.torch_on
-    assert loop.plant.zaxis.position_mm >= loop.seq.safe_z_mm - 0.01
+    assert loop.plant.zaxis.position_mm >= loop.sequence.safe_z_mm - 0.01
     refused = loop.m3()
     assert not refused.ok
     assert "re-arm" in refused.error
-    loop.seq.rearm(loop.now)
-    loop.execute(loop.seq.drain())
-    assert loop.seq.state is State.IDLE
+    assert loop.request("rearm").ok
+    assert loop.sequence.state is State.IDLE
 
 
 def test_breakaway_mid_cut_faults() -> None:
@@ -117,8 +118,8 @@ def test_breakaway_mid_cut_faults() -> None:
     loop.plant.gantry.feed_line("G1 X400 Y50 F5500")
     loop.run_until(lambda: False, 0.3)
     loop.plant.head.trip_breakaway()
-    loop.run_until(lambda: loop.seq.state is State.FAULTED, 1.0)
-    assert "breakaway" in loop.seq.error.lower()
+    loop.run_until(lambda: loop.sequence.state is State.FAULTED, 1.0)
+    assert "breakaway" in loop.sequence.error.lower()
     assert not loop.plant.torch_on
 
 
@@ -127,7 +128,7 @@ def test_float_contact_mid_cut_faults_before_a_crash() -> None:
     loop = ready(cut_voltage_v=95.0)
     assert loop.m3().ok
     assert not loop.move("G1 X400 Y50 F5500", max_s=10)
-    assert "float switch during the cut" in loop.seq.error
+    assert "float switch during the cut" in loop.sequence.error
     assert not loop.plant.torch_on
     assert loop.plant.truth.violations.get("torch_touching_plate_while_cutting", 0) <= 1
 
@@ -137,40 +138,38 @@ def test_z_min_limit_during_thc_faults_before_the_plate() -> None:
     loop = ready(cut_voltage_v=100.0)
     surface = loop.plant.surface_z_mm
     assert loop.m3().ok
-    loop.seq.config = replace(loop.seq.config, z_min_mm=surface + 0.8)
+    loop.sequence.config = replace(loop.sequence.config, z_min_mm=surface + 0.8)
     assert not loop.move("G1 X400 Y50 F5500", max_s=10)
-    assert "Z min limit" in loop.seq.error
+    assert "Z min limit" in loop.sequence.error
     assert loop.plant.true_height_mm > 0.5
 
 
 def test_stop_after_pierce_waits_for_cycle_start_then_relights() -> None:
     """S1: pierce, torch off, Z up, pause; cycle start lowers, relights and answers M3."""
     loop = ready(stop_after_pierce=True)
-    loop.seq.start(loop.now, (50.0, 50.0))
-    loop.execute(loop.seq.drain())
-    assert loop.run_until(lambda: loop.seq.state is State.S1_WAIT, 20)
+    loop.submit("M3")
+    assert loop.run_until(lambda: loop.sequence.state is State.S1_WAIT, 20)
     assert not loop.plant.torch_on
     assert loop.pauses
     assert not loop.replies  # M3 still pending
     loop.run_until(lambda: False, 0.5)
-    assert loop.seq.state is State.S1_WAIT
-    loop.seq.cycle_start(loop.now)
-    loop.execute(loop.seq.drain())
+    assert loop.sequence.state is State.S1_WAIT
+    loop.submit_request("cycle_start")
     assert loop.run_until(lambda: bool(loop.replies), 10)
     assert loop.replies[0].ok
     assert loop.plant.arc_ok
-    assert loop.seq.pierce_count == 2
+    assert loop.sequence.pierce_count == 2
 
 
 def test_link_down_mid_cut_faults() -> None:
     """A board link loss during the cut takes the fault path (the board drops the torch)."""
     loop = ready()
     assert loop.m3().ok
-    loop.seq.on_link_down("usb unplugged")
-    actions = loop.seq.drain()
-    assert act.Torch(False) in actions
+    loop.sequence.on_link_down("usb unplugged")
+    actions = loop.sequence.drain()
+    assert act.SwitchTorch(False) in actions
     assert any(isinstance(a, act.PauseProgram) for a in actions)
-    assert loop.seq.state is State.FAULTED
+    assert loop.sequence.state is State.FAULTED
 
 
 def test_ihs_skip_when_the_next_cut_starts_close_by() -> None:
@@ -191,12 +190,11 @@ def test_an_error_forces_touch_off_even_when_skip_would_apply() -> None:
     loop = ready(config=SequenceConfig(ihs_skip_distance_mm=50.0, ihs_skip_type=1))
     assert loop.m3().ok
     loop.move("G1 X60 Y50 F5500")
-    loop.seq.on_link_down("blip")
-    loop.execute(loop.seq.drain())
-    assert loop.seq.state is State.FAULTED
+    loop.sequence.on_link_down("blip")
+    loop.pump()
+    assert loop.sequence.state is State.FAULTED
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
-    loop.seq.rearm(loop.now)
-    loop.execute(loop.seq.drain())
+    assert loop.request("rearm").ok
     before = sum(1 for s in loop.trace.state if s == "probing")
     assert loop.m3().ok
     assert sum(1 for s in loop.trace.state if s == "probing") > before
@@ -214,46 +212,44 @@ def test_dry_run_runs_everything_but_the_arc() -> None:
 def test_ohmic_test_detects_a_shorted_torch() -> None:
     """Ohmic sense on with the shield touching the plate is reported as a short."""
     loop = ready()
-    loop.execute([act.MoveZ(loop.plant.surface_z_mm - 0.2, 10.0, 0)])
+    loop.complete(loop.client.move_z(loop.plant.surface_z_mm - 0.2, 10.0))
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
-    loop.seq.ohmic_test(loop.now)
-    loop.execute(loop.seq.drain())
-    loop.run_until(lambda: loop.seq.state is not State.OHMIC_TEST, 1)
-    assert "shorted torch" in loop.seq.error
+    loop.submit_request("ohmic_test")
+    loop.run_until(lambda: loop.sequence.state is not State.OHMIC_TEST, 1)
+    assert "shorted torch" in loop.sequence.error
 
 
 def test_ohmic_test_in_the_air_passes() -> None:
     """With the torch clear of the plate the ohmic test ends quietly."""
     loop = ready()
-    loop.seq.ohmic_test(loop.now)
-    loop.execute(loop.seq.drain())
-    loop.run_until(lambda: loop.seq.state is not State.OHMIC_TEST, 1)
-    assert loop.seq.state is State.IDLE
-    assert loop.seq.error == ""
+    loop.submit_request("ohmic_test")
+    loop.run_until(lambda: loop.sequence.state is not State.OHMIC_TEST, 1)
+    assert loop.sequence.state is State.IDLE
+    assert loop.sequence.error == ""
 
 
 def test_m3_outside_plasma_mode_or_in_legacy_mode_is_refused() -> None:
     """M3 without T112 M6, or after a bare G200, gets a clear error and changes nothing."""
     loop = ready()
-    loop.seq.plasma_mode = False
+    loop.sequence.plasma_mode = False
     assert "T112 M6" in loop.m3().error
-    loop.seq.plasma_mode = True
-    loop.seq.g200_active = False
+    loop.sequence.plasma_mode = True
+    loop.sequence.g200_active = False
     assert "legacy" in loop.m3().error
-    assert loop.seq.state is State.IDLE
+    assert loop.sequence.state is State.IDLE
 
 
 def test_safe_height_is_raised_by_what_thc_lifted() -> None:
     """On a plate that rises under the cut, the safe height grows with the THC lift."""
     loop = ready("warped_sheet", cut_voltage_v=122.0)
     assert loop.m3().ok
-    before = loop.seq.safe_z_mm
+    before = loop.sequence.safe_z_mm
     assert loop.move("G1 X600 Y100 F6000", max_s=30)
     loop.m5()
-    cut = loop.seq.cut
+    cut = loop.sequence.cut
     assert cut is not None
     assert cut.thc_lift_mm > 0.3
-    assert loop.seq.safe_z_mm == pytest.approx(before + cut.thc_lift_mm, abs=0.05)
+    assert loop.sequence.safe_z_mm == pytest.approx(before + cut.thc_lift_mm, abs=0.05)
 
 
 def test_auto_voltage_samples_the_target_at_speed() -> None:
@@ -262,7 +258,7 @@ def test_auto_voltage_samples_the_target_at_speed() -> None:
     started, ok, _ = loop.cut(*SQUARE)
     assert started.ok
     assert ok
-    target = loop.seq.thc.target_v
+    target = loop.sequence.thc.target_v
     assert target is not None
     assert target == pytest.approx(125.0, abs=1.0)  # flat_clean: 125 V at 1.5 mm
     assert loop.plant.truth.summary().cuts[0].height_rms_error_mm < 0.1
@@ -273,8 +269,8 @@ def test_puddle_jump_answers_m3_early_and_then_lowers_to_cut_height() -> None:
     loop = ready(config=SequenceConfig(puddle_height_percent=150.0, puddle_delay_s=0.2))
     reply = loop.m3()
     assert reply.ok
-    assert str(loop.seq.state) == "puddle_jump"
-    assert loop.run_until(lambda: loop.seq.state is State.CUTTING, 3)
+    assert str(loop.sequence.state) == "puddle_jump"
+    assert loop.run_until(lambda: loop.sequence.state is State.CUTTING, 3)
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 2)
     assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.1)
 
@@ -284,7 +280,7 @@ def test_mode_0_derives_arc_ok_from_the_voltage() -> None:
     from dthc_bridge.controller.commands import ThcMode
 
     loop = ready()
-    loop.seq.mode = ThcMode.VOLTAGE_ONLY
+    loop.sequence.mode = ThcMode.VOLTAGE_ONLY
     started, ok, ended = loop.cut(*SQUARE)
     assert started.ok
     assert ok
@@ -297,7 +293,7 @@ def test_mode_2_follows_the_external_boxs_up_down_outputs() -> None:
     from dthc_bridge.controller.commands import ThcMode
 
     loop = ready("warped_sheet")
-    loop.seq.mode = ThcMode.ARC_OK_AND_UPDOWN
+    loop.sequence.mode = ThcMode.ARC_OK_AND_UPDOWN
     loop.plant.gantry.feed_line("G0 X100 Y100")
     loop.run_until(lambda: loop.plant.gantry.idle, 10)
     started, ok, _ = loop.cut("G1 X700 Y100 F6000")
@@ -318,5 +314,5 @@ def test_each_cut_limits_slow_down_following_to_half_the_cut_height_down(
     loop = ready(cut_height_mm=cut_height_mm)
     started = loop.m3()
     assert started.ok
-    assert loop.seq.thc.slow_follow_max_down_mm == pytest.approx(cut_height_mm / 2)
+    assert loop.sequence.thc.slow_follow_max_down_mm == pytest.approx(cut_height_mm / 2)
     assert loop.m5().ok

@@ -362,12 +362,12 @@ def test_locks_prevent_the_dive_an_unlocked_thc_makes(
         no_anti_dive = not locked and unlock == "velocity"
         loop = ready(scenario, anti_dive_percent=0.0) if no_anti_dive else ready(scenario)
         if unlock == "velocity":
-            loop.requested_override_mm_s = 5500 / 60
+            loop.reported_feed_mm_min = 5500
         if not locked and unlock == "void":
-            loop.seq.thc.config = replace(loop.seq.thc.config, void_slope_v_s=1e9)
+            loop.sequence.thc.config = replace(loop.sequence.thc.config, void_slope_v_s=1e9)
         loop.plant.gantry.feed_line(path[0])
         loop.run_until(lambda: loop.plant.gantry.idle, 10)
-        loop.requested_override_mm_s = 5500 / 60 if unlock == "velocity" else None
+        loop.reported_feed_mm_min = 5500 if unlock == "velocity" else None
         loop.cut(*path[1:])
         return cut_stats(loop)
 

@@ -9,6 +9,7 @@ import pytest
 from dthc_bridge.board import BoardClient
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.controller.sequence import State
+from dthc_bridge.events import ControllerEvent, ProgramPaused
 from dthc_bridge.link import LinkSupervisor, LinkTiming
 from dthc_bridge.service import ControllerService
 from mock_device.sim import SimulatedBoard
@@ -22,9 +23,9 @@ TIMING = LinkTiming(lease_ms=150, backoff_initial_s=0.05, backoff_max_s=0.2)
 async def test_unplug_mid_cut_faults_pauses_the_sender_and_the_lease_drops_the_torch() -> None:
     """Link lost while cutting: FAULTED, a pause event, touch-off required, torch off."""
     sim = RealtimeSimBoard(SimulatedBoard("flat_clean", seed=3))
-    supervisor = LinkSupervisor("memory://board", TIMING, opener=sim.opener)
+    supervisor = LinkSupervisor("sim://board", TIMING, opener=sim.opener)
     service = ControllerService(PlasmaController(), supervisor, BoardClient(supervisor))
-    events: list[dict[str, object]] = []
+    events: list[ControllerEvent] = []
 
     async def collect() -> None:
         async for event in service.subscribe_events():
@@ -45,10 +46,10 @@ async def test_unplug_mid_cut_faults_pauses_the_sender_and_the_lease_drops_the_t
             sim.refuse_connections = True
             sim.unplug()
             await asyncio.sleep(0.5)  # well past the 150 ms lease
-            assert service.seq.state is State.FAULTED
-            assert "link down" in service.seq.error
-            assert service.seq.probe_required
-            assert any(e.get("type") == "pause" for e in events)
+            assert service.sequence.state is State.FAULTED
+            assert "link down" in service.sequence.error
+            assert service.sequence.probe_required
+            assert any(isinstance(e, ProgramPaused) for e in events)
             assert not sim.board.plant.torch_on
         finally:
             for task in tasks:

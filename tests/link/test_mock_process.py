@@ -25,9 +25,8 @@ class ProcessRig:
         self.proc = proc
         self.pty = pty
         self.states: list[tuple[str, str]] = []
-        self.supervisor = LinkSupervisor(
-            str(pty), TIMING, on_state=lambda s, r: self.states.append((str(s), r))
-        )
+        self.supervisor = LinkSupervisor(str(pty), TIMING)
+        self.supervisor.add_state_listener(lambda c: self.states.append((str(c.state), c.reason)))
         self.client = BoardClient(self.supervisor)
 
     async def wait_state(self, state: LinkState, within_s: float) -> None:

@@ -6,6 +6,7 @@ import asyncio
 import re
 from collections.abc import AsyncIterator, Mapping
 
+from dthc_bridge.events import ControllerEvent
 from dthc_bridge.mqtt import CommandResult
 
 __all__ = ["FakeController"]
@@ -25,7 +26,7 @@ class FakeController:
         self.link: tuple[str, str] = ("online", "handshake complete")
         self.diag: dict[str, object] = {"link": {"requests": 0, "timeouts": 0}}
         self.point: dict[str, object] | None = None
-        self._events: asyncio.Queue[dict[str, object]] = asyncio.Queue()
+        self._events: asyncio.Queue[ControllerEvent] = asyncio.Queue()
         self.called = asyncio.Event()  # set on every execute_* call
         self._lost = asyncio.Event()
 
@@ -80,13 +81,13 @@ class FakeController:
     def telemetry(self) -> dict[str, object] | None:
         return self.point
 
-    async def subscribe_events(self) -> AsyncIterator[dict[str, object]]:
+    async def subscribe_events(self) -> AsyncIterator[ControllerEvent]:
         while True:
             yield await self._events.get()
 
     # --- test controls ---------------------------------------------------------------------
 
-    def emit(self, event: dict[str, object]) -> None:
+    def emit(self, event: ControllerEvent) -> None:
         self._events.put_nowait(event)
 
     async def wait_sender_lost(self, count: int = 1, timeout_s: float = 5.0) -> None:

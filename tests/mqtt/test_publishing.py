@@ -7,6 +7,8 @@ import asyncio
 
 import pytest
 
+from dthc_bridge.events import ArcLost, ProgramPaused
+
 from .conftest import Broker
 from .fakes import FakeController
 from .helpers import fast_settings, open_probe, running_gateway
@@ -74,12 +76,12 @@ async def test_controller_events_are_published_in_order_at_qos_1_not_retained(
         running_gateway(settings) as (_, controller),
         open_probe(broker, f"{root}/event") as probe,
     ):
-        controller.emit({"type": "arc_lost", "reason": "arc lost", "t": 1.5})
-        controller.emit({"type": "pause", "reason": "breakaway"})
+        controller.emit(ArcLost(1.5, "arc lost"))
+        controller.emit(ProgramPaused(2.0, "breakaway"))
         await probe.wait_count(f"{root}/event", 2)
     assert probe.json_on(f"{root}/event") == [
         {"type": "arc_lost", "reason": "arc lost", "t": 1.5},
-        {"type": "pause", "reason": "breakaway"},
+        {"type": "pause", "reason": "breakaway", "t": 2.0},
     ]
     assert all(m.qos == 1 and not m.retain for m in probe.on(f"{root}/event"))
 
