@@ -63,7 +63,11 @@ def _run(config_path: Path | None, log_level: str | None) -> int:
     except ConfigError as exc:
         print(f"dthc-bridge: {exc}", file=sys.stderr)
         return 2
-    configure_logging(log_level or config.logging.level, json=config.logging.json_logs)
+    configure_logging(
+        log_level or config.logging.level,
+        json=config.logging.json_logs,
+        trace_frames=config.logging.trace_frames,
+    )
     return asyncio.run(run_daemon(config))
 
 

@@ -97,6 +97,9 @@ class ControllerSettings(_Closed):
 class LoggingSettings(_Closed):
     level: Literal["debug", "info", "warning", "error"] = "info"
     json_logs: bool | None = Field(None, description="None: JSON when stderr is not a TTY")
+    trace_frames: bool = Field(
+        False, description="keep each session's last frames; log them when a corrupt one arrives"
+    )
 
 
 class DaemonConfig(BaseSettings):

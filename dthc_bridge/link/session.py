@@ -28,6 +28,7 @@ from .errors import (
     ProtocolVersionMismatch,
     RequestTimeout,
 )
+from .frametrace import new_frame_trace
 from .stats import LinkStats
 from .timing import LinkTiming
 
@@ -84,6 +85,7 @@ class BoardSession:
         self._last_sample_seq: int | None = None
         self._last_event_counter: int | None = None
         self.lost: asyncio.Future[LinkError] = self._loop.create_future()
+        self._trace = new_frame_trace()  # None unless the trace switch is on
 
     # --- lifetime --------------------------------------------------------------------------
 
@@ -128,6 +130,8 @@ class BoardSession:
         self.stats.bytes_out += len(data)
         self.stats.frames_out += 1
         self._last_tx_s = self._loop.time()
+        if self._trace is not None:
+            self._trace.record_out(data)
 
     # --- requests --------------------------------------------------------------------------
 
@@ -265,8 +269,12 @@ class BoardSession:
 
     def _on_decode_error(self, error: fp.DecodeError) -> None:
         log.debug("bad_frame", url=self.url, error=str(error))
+        if self._trace is not None:
+            self._trace.dump(log, "bad_frame", url=self.url, error=str(error))
 
     def _on_bytes(self, data: bytes) -> None:
+        if self._trace is not None:
+            self._trace.record_in(data)  # before decoding: a bad frame is in its own dump
         for msg in self.decoder.feed(data):
             cls = type(msg)
             if cls is fp.Samples:
