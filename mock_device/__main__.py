@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -72,6 +73,7 @@ def _parse_listen(url: str) -> tuple[str, int]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    parent_pid = os.getppid()  # first: the mock exits when this process is gone
     args = build_parser().parse_args(argv)
     plan = FaultPlan(
         bit_flip_rate=args.bit_flip_rate,
@@ -111,6 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         program=program,
         gantry=gantry,
         latency_log=args.latency_log,
+        parent_pid=parent_pid,
     )
     return asyncio.run(MockBoardProcess(board, link, plan, options).run())
 

@@ -4,6 +4,10 @@ The firmware and plant run in board time; each wake-up runs every tick that is d
 flushes what the board sent to the link. Host bytes are handled the moment they arrive,
 and their replies flushed at once, so acknowledgements do not wait for the next batch.
 
+``parent_pid`` (set by ``python -m mock_device``): the run loop ends, as on SIGTERM, once the
+process's parent is no longer that pid, checked every ``PARENT_CHECK_S``; a mock started
+by anything, even a shell script that is then killed, does not outlive it.
+
 ``latency_log`` (``--latency-log PATH``) records, in real-clock board time, when each
 Z_VELOCITY arrived and when each SAMPLES frame was handed to the link (latency_log.py).
 """
@@ -14,6 +18,7 @@ import asyncio
 import contextlib
 import dataclasses
 import json
+import os
 import signal
 import sys
 from dataclasses import dataclass
@@ -30,6 +35,7 @@ from .sim import SimulatedBoard
 __all__ = ["MockBoardProcess", "ProcessOptions"]
 
 MAX_TICKS_PER_WAKE = 200  # after a long stall, catch up in slices so the link is served
+PARENT_CHECK_S = 0.25  # how often the run loop asks whether its parent is still there
 
 
 @dataclass(frozen=True)
@@ -39,6 +45,8 @@ class ProcessOptions:
     program: tuple[str, ...] = ()
     gantry: tuple[str, int] | None = None  # host, port of the gantry control port
     latency_log: Path | None = None  # JSON lines: Z_VELOCITY receipt, SAMPLES send times
+    parent_pid: int | None = None  # stop once the parent is another process (None: never)
+    parent_check_s: float = PARENT_CHECK_S
 
 
 class MockBoardProcess:
@@ -166,6 +174,7 @@ class MockBoardProcess:
         if self.latency is not None:
             fw = self.board.firmware
             self.latency.start(t0, fw.t_us, fw.boot_id)
+        parent_check_at = t0
         try:
             while not self.stop.is_set():
                 self.board.tick_due(loop.time(), MAX_TICKS_PER_WAKE)
@@ -176,6 +185,10 @@ class MockBoardProcess:
                     and self.board.t_s >= self.options.duration_s
                 ):
                     break
+                if loop.time() >= parent_check_at:
+                    parent_check_at = loop.time() + self.options.parent_check_s
+                    if self._parent_gone():
+                        break
                 fw = self.board.firmware
                 wake = self.board.due_at_s(fw.t_us + fw.sampling.period_us * fw.sampling.batch_size)
                 with contextlib.suppress(TimeoutError):
@@ -190,6 +203,13 @@ class MockBoardProcess:
                     await self._unplug_task
             self._finish()
         return 0
+
+    def _parent_gone(self) -> bool:
+        expected = self.options.parent_pid
+        if expected is None or os.getppid() == expected:
+            return False
+        self._log("parent_gone", parent_pid=expected)
+        return True
 
     @property
     def boot_hex(self) -> str:

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from dthc_tools.procs import die_with_parent
+
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
 
@@ -17,7 +19,7 @@ def test_demo_json_runs_the_masso_sample_safely(tmp_path: Path) -> None:
     plot = tmp_path / "demo.png"
     proc = subprocess.run(
         [sys.executable, "-m", "dthc_bridge", "demo", "--json", "--plot", str(plot)],
-        capture_output=True, text=True, timeout=120, check=False,
+        capture_output=True, text=True, timeout=120, check=False, preexec_fn=die_with_parent(),
     )  # fmt: skip
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary = json.loads(proc.stdout)

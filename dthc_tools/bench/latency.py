@@ -82,6 +82,7 @@ from mock_device.latency_log import read_latency_log
 from mock_device.plant import load_scenario
 from mock_device.sim import SimulatedBoard
 
+from ..procs import die_with_parent
 from .report import Goal, goals_block, percentiles, proc_cpu_s
 
 __all__ = [
@@ -439,7 +440,7 @@ async def measure_pty(duration_s: float, batch_size: int, scenario: str) -> dict
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "mock_device", "--pty", str(pty), "--scenario", scenario,
             "--seed", "1", "--program", str(program), "--latency-log", str(log),
-            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, preexec_fn=die_with_parent(),
         )  # fmt: skip
         try:
             assert proc.stdout is not None

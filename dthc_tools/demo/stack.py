@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import json
 import os
+import pwd
 import shutil
 import signal
 import socket
@@ -24,6 +25,7 @@ from typing import IO, Any
 
 import aiomqtt
 
+from ..procs import die_with_parent
 from ..sender import DaemonClient, Sender, SendReport, SimGantryBackend
 
 __all__ = ["Stack", "StackOptions", "StackResult"]
@@ -84,12 +86,17 @@ class _Broker:
             if self._mosquitto is None:
                 raise RuntimeError("mosquitto is not installed")
             config = self.workdir / "mosquitto.conf"
+            # Stay this user: started as root, mosquitto would switch to user "mosquitto",
+            # which clears the parent-death signal (procs.py) and outlives a killed demo.
+            user = pwd.getpwuid(os.getuid()).pw_name
             config.write_text(
                 f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+                f"user {user}\n"
             )
             self._proc = subprocess.Popen(  # noqa: S603, ASYNC220 - our broker, started once
                 [self._mosquitto, "-c", str(config)],
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                preexec_fn=die_with_parent(),
             )  # fmt: skip
         else:
             from amqtt.broker import Broker  # noqa: PLC0415 - only without mosquitto
@@ -179,6 +186,7 @@ class Stack:
              "--truth", str(self.truth), "--gantry-listen", "socket://127.0.0.1:0",
              *self.options.mock_args],
             stdout=subprocess.PIPE, stderr=self._log("mock.log"), text=True,
+            preexec_fn=die_with_parent(),
         )  # fmt: skip
         assert self.mock.stdout is not None
         ready = self.mock.stdout.readline().split()
@@ -199,7 +207,7 @@ class Stack:
         self.daemon = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
             [sys.executable, "-m", "dthc_bridge", "run", "--config", str(config)],
             stdout=self._log("daemon.log"), stderr=subprocess.STDOUT,
-            env={**os.environ, **self.options.daemon_env},
+            env={**os.environ, **self.options.daemon_env}, preexec_fn=die_with_parent(),
         )  # fmt: skip
 
     @property

@@ -18,6 +18,7 @@ from dthc_tools.bench.latency import (
     rectangle_program,
 )
 from dthc_tools.bench.report import Goal, percentiles
+from dthc_tools.procs import die_with_parent
 
 HEADER = {"suite", "command", "python", "machine", "goals", "pass"}
 
@@ -97,7 +98,7 @@ def test_latency_suite_short_run_as_a_module() -> None:
     """``python -m dthc_tools.bench latency --json --duration 2``: mock on a pty and in-process."""
     done = subprocess.run(
         [sys.executable, "-m", "dthc_tools.bench", "latency", "--json", "--duration", "2"],
-        capture_output=True, text=True, timeout=55, check=False,
+        capture_output=True, text=True, timeout=55, check=False, preexec_fn=die_with_parent(),
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)

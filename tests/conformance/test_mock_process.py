@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 from dthc_bridge.conformance import CHECK_NAMES, EXIT_FAILED, EXIT_PASSED
+from dthc_tools.procs import die_with_parent
 
 pytestmark = pytest.mark.slow
 
@@ -57,6 +58,7 @@ def mock_board(tmp: Path, variant: str = "good") -> Iterator[tuple[Path, int]]:
         [sys.executable, "-m", "mock_device", "--pty", str(pty), "--seed", "5",
          "--firmware-variant", variant],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        preexec_fn=die_with_parent(),
     )  # fmt: skip
     try:
         assert proc.stdout is not None
@@ -80,7 +82,7 @@ def run_conformance(*args: str) -> SuiteRun:
     done = subprocess.run(
         [sys.executable, "-m", "dthc_bridge.conformance", *args],
         stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=SUITE_TIMEOUT_S,
-        check=False,
+        check=False, preexec_fn=die_with_parent(),
     )  # fmt: skip
     return SuiteRun(done.returncode, done.stdout, done.stderr, time.monotonic() - t0)
 

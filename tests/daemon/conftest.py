@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from dthc_tools.procs import die_with_parent
 from tests.mqtt.conftest import Broker, own_broker  # noqa: F401 - shared fixture
 
 STARTUP_S = 10.0
@@ -27,6 +28,7 @@ class MockBoard:
             [sys.executable, "-m", "mock_device", "--pty", str(self.pty), "--seed", "2",
              "--truth", str(self.truth), *extra],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            preexec_fn=die_with_parent(),
         )  # fmt: skip
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline()
@@ -54,6 +56,7 @@ class Daemon:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "dthc_bridge", "run", "--config", str(self.config)],
             stdout=self._log, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})},
+            preexec_fn=die_with_parent(),
         )  # fmt: skip
 
     def signal(self, sig: int) -> None:

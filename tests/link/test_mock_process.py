@@ -14,6 +14,7 @@ import pytest
 import firmware_protocol as fp
 from dthc_bridge.board import BoardClient
 from dthc_bridge.link import LinkState, LinkSupervisor, LinkTiming
+from dthc_tools.procs import die_with_parent
 
 pytestmark = pytest.mark.slow
 
@@ -45,6 +46,7 @@ async def rig(tmp_path: Path, request: pytest.FixtureRequest) -> AsyncIterator[P
         [sys.executable, "-m", "mock_device", "--pty", str(pty), "--seed", "4",
          "--unplug-for", "0.4", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        preexec_fn=die_with_parent(),
     )  # fmt: skip
     assert proc.stdout is not None
     assert (await asyncio.to_thread(proc.stdout.readline)).startswith("READY")
@@ -119,7 +121,7 @@ async def test_device_that_appears_later_is_picked_up(tmp_path: Path) -> None:
         assert "No such file" in supervisor.last_error or "could not open" in supervisor.last_error
         proc = subprocess.Popen(  # noqa: ASYNC220 - the test needs the Popen handle
             [sys.executable, "-m", "mock_device", "--pty", str(pty)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=die_with_parent(),
         )  # fmt: skip
         session = await supervisor.wait_online(8.0)
         assert session.info is not None

@@ -15,6 +15,7 @@ import pytest
 import serial
 
 import firmware_protocol as fp
+from dthc_tools.procs import die_with_parent
 
 pytestmark = pytest.mark.slow
 
@@ -25,6 +26,7 @@ def _start(pty: Path, *extra: str) -> subprocess.Popen[str]:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=die_with_parent(),
     )
     assert proc.stdout is not None
     line = proc.stdout.readline()

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from dthc_tools.procs import die_with_parent
+
 MOSQUITTO = shutil.which("mosquitto") or (
     "/usr/sbin/mosquitto" if os.access("/usr/sbin/mosquitto", os.X_OK) else None
 )
@@ -80,7 +82,7 @@ class Broker:
         self._write_config()
         self.proc = subprocess.Popen(
             [MOSQUITTO, "-c", str(self.config)],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=die_with_parent(),
         )  # fmt: skip
         deadline = time.monotonic() + START_TIMEOUT_S
         while True:

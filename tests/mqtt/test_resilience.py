@@ -15,6 +15,7 @@ import aiomqtt
 import pytest
 
 from dthc_bridge.mqtt import MqttTls
+from dthc_tools.procs import die_with_parent
 
 from .conftest import USERS, Broker
 from .helpers import fast_settings, open_probe, running_gateway, unique_base
@@ -32,6 +33,7 @@ async def helper_process(
     proc = subprocess.Popen(  # noqa: ASYNC220 - the test needs the handle to SIGKILL it
         [sys.executable, "-m", "tests.mqtt.procs", role, str(broker.port), name],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        preexec_fn=die_with_parent(),
     )  # fmt: skip
     try:
         assert proc.stdout is not None
