@@ -10,14 +10,15 @@ instance (``default=_THC.deadband_v``) and keeps only its bounds. The pure objec
 source because they are what the controller, the tests and the benchmarks run without a
 configuration file; the model only narrows what a user may set. Attribute access (not a
 name in a string) lets mypy catch a misspelt field. ``tests/daemon/test_defaults.py``
-fails when the two drift.
+fails when the two drift. :func:`default_controller_configs` gives tools the controller
+objects the daemon runs with no configuration.
 """
 
 from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, cast
+from typing import Any, Literal, NamedTuple, cast
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
@@ -30,7 +31,13 @@ from .controller.thc import ThcConfig
 from .link import LinkTiming
 from .mqtt.settings import MqttSettings
 
-__all__ = ["ConfigError", "DaemonConfig", "load_config"]
+__all__ = [
+    "ConfigError",
+    "ControllerConfigs",
+    "DaemonConfig",
+    "default_controller_configs",
+    "load_config",
+]
 
 # The pure objects' defaults, read by the fields below (never repeated as literals).
 _LINK = LinkTiming()
@@ -111,6 +118,25 @@ class ControllerSettings(_Closed):
     @property
     def thc_mode(self) -> ThcMode:
         return ThcMode(self.mode)
+
+
+class ControllerConfigs(NamedTuple):
+    """The pure objects a :class:`CutSequence` is built from, and the mode it runs in."""
+
+    sequence: SequenceConfig
+    thc: ThcConfig
+    mode: ThcMode
+
+
+def default_controller_configs() -> ControllerConfigs:
+    """The controller configuration the daemon runs without a file or environment override.
+
+    Built the way ``daemon.build_service`` builds it, from the ``[controller]`` section's
+    defaults (the environment is not read), so a simulation or benchmark runs exactly the
+    daemon's values.
+    """
+    controller = ControllerSettings()
+    return ControllerConfigs(controller.sequence(), controller.thc.build(), controller.thc_mode)
 
 
 class LoggingSettings(_Closed):

@@ -26,12 +26,16 @@ import firmware_protocol as fp
 from dthc_bridge import config as config_module
 from dthc_bridge.config import (
     BoardSettings,
+    ControllerConfigs,
     ControllerSettings,
     DaemonConfig,
     ThcSettings,
+    default_controller_configs,
 )
+from dthc_bridge.controller.commands import ThcMode
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig
 from dthc_bridge.controller.thc import ThcConfig
+from dthc_bridge.daemon import build_service
 from dthc_bridge.link import LinkSupervisor, LinkTiming
 from dthc_bridge.transport import open_transport
 
@@ -228,3 +232,35 @@ def test_baudrate_default_is_the_link_supervisors() -> None:
     baudrate = DaemonConfig().board.baudrate
     for function in (LinkSupervisor, open_transport):
         assert inspect.signature(function).parameters["baudrate"].default == baudrate
+
+
+def test_default_controller_configs_are_the_sections_defaults() -> None:
+    """The tools' defaults are built from DaemonConfig() the way build_service does."""
+    controller = DaemonConfig().controller
+    assert default_controller_configs() == ControllerConfigs(
+        controller.sequence(), controller.thc.build(), controller.thc_mode
+    )
+    assert default_controller_configs().mode is ThcMode.ARC_OK_AND_VOLTAGE
+
+
+def test_default_controller_configs_ignore_the_environment(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A DTHC_* variable changes the daemon's config, never the tools' defaults."""
+    monkeypatch.setenv("DTHC_CONTROLLER__THC__KP_PER_S", "20")
+    monkeypatch.setenv("DTHC_CONTROLLER__SAFE_HEIGHT_MM", "30")
+    assert DaemonConfig().controller.thc.kp_per_s == 20.0
+    assert DaemonConfig().controller.safe_height_mm == 30.0
+    configs = default_controller_configs()
+    assert configs.thc.kp_per_s == ThcConfig().kp_per_s
+    assert configs.sequence.safe_height_mm == SequenceConfig().safe_height_mm
+
+
+async def test_default_controller_configs_are_what_the_daemon_runs() -> None:
+    """build_service(DaemonConfig()) drives a CutSequence with exactly these objects."""
+    supervisor, service = build_service(DaemonConfig())
+    sequence, thc, mode = default_controller_configs()
+    assert service.seq.config == sequence
+    assert service.seq.thc.config == thc
+    assert service.seq.mode is mode
+    assert supervisor.timing == DaemonConfig().board.timing() == LinkTiming()
