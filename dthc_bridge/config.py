@@ -2,16 +2,28 @@
 
 Unknown keys are refused with the exact key named; bounds sit beside each field.
 Environment variables override the file: ``DTHC_MQTT__HOST=broker`` sets ``[mqtt] host``.
+
+One source of truth for defaults: the pure objects the daemon builds (:class:`ThcConfig`,
+:class:`SequenceConfig`, :class:`LinkTiming`, the protocol's constants) define every
+default once; a field here that sets one of their values reads its default from a default
+instance (``default=_THC.deadband_v``) and keeps only its bounds. The pure objects are the
+source because they are what the controller, the tests and the benchmarks run without a
+configuration file; the model only narrows what a user may set. Attribute access (not a
+name in a string) lets mypy catch a misspelt field. ``tests/daemon/test_defaults.py``
+fails when the two drift. :func:`default_controller_configs` gives tools the controller
+objects the daemon runs with no configuration.
 """
 
 from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple, cast
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
+
+import firmware_protocol as fp
 
 from .controller.commands import ThcMode
 from .controller.sequence import SequenceConfig
@@ -19,7 +31,18 @@ from .controller.thc import ThcConfig
 from .link import LinkTiming
 from .mqtt.settings import MqttSettings
 
-__all__ = ["ConfigError", "DaemonConfig", "load_config"]
+__all__ = [
+    "ConfigError",
+    "ControllerConfigs",
+    "DaemonConfig",
+    "default_controller_configs",
+    "load_config",
+]
+
+# The pure objects' defaults, read by the fields below (never repeated as literals).
+_LINK = LinkTiming()
+_SEQ = SequenceConfig()
+_THC = ThcConfig()
 
 
 class _Closed(BaseModel):
@@ -29,11 +52,11 @@ class _Closed(BaseModel):
 class BoardSettings(_Closed):
     link: str = Field("/dev/dthc0", description="/dev/..., socket://HOST:PORT or usb://VID:PID")
     baudrate: int = Field(921_600, ge=9600, le=12_000_000)
-    lease_ms: int = Field(250, ge=20, le=2000)
-    ack_timeout_ms: float = Field(25.0, ge=2.0, le=2000.0)
-    max_attempts: int = Field(5, ge=1, le=20)
-    sample_rate_hz: int = Field(1000, ge=100, le=20_000)
-    batch_size: int = Field(5, ge=1, le=100)
+    lease_ms: int = Field(_LINK.lease_ms, ge=fp.LEASE_MIN_MS, le=fp.LEASE_MAX_MS)
+    ack_timeout_ms: float = Field(_LINK.ack_timeout_s * 1000.0, ge=2.0, le=2000.0)
+    max_attempts: int = Field(_LINK.max_attempts, ge=1, le=20)
+    sample_rate_hz: int = Field(fp.DEFAULT_SAMPLE_RATE_HZ, ge=100, le=20_000)
+    batch_size: int = Field(fp.DEFAULT_BATCH_SIZE, ge=1, le=fp.MAX_BATCH_SIZE)
     filter: Literal["none", "moving_average", "low_pass", "median3"] = "median3"
     filter_param: int = Field(0, ge=0, le=500)
     arc_lost_ms: int = Field(0, ge=0, le=1000, description="board-side arc-lost latch; 0 = off")
@@ -49,40 +72,43 @@ class BoardSettings(_Closed):
 
 
 class ThcSettings(_Closed):
-    kp_per_s: float = Field(14.0, gt=0.0, le=100.0)
-    ki_per_s2: float = Field(40.0, ge=0.0, le=1000.0)
-    deadband_v: float = Field(0.3, ge=0.0, le=5.0)
-    lowpass_hz: float = Field(40.0, gt=0.0, le=500.0)
-    slope_v_per_mm: float = Field(7.5, gt=1.0, le=20.0)
-    max_speed_mm_s: float = Field(30.0, gt=0.0, le=100.0)
-    max_accel_mm_s2: float = Field(500.0, gt=0.0, le=5000.0)
-    void_slope_v_s: float = Field(250.0, gt=0.0)
+    kp_per_s: float = Field(_THC.kp_per_s, gt=0.0, le=100.0)
+    ki_per_s2: float = Field(_THC.ki_per_s2, ge=0.0, le=1000.0)
+    deadband_v: float = Field(_THC.deadband_v, ge=0.0, le=5.0)
+    lowpass_hz: float = Field(_THC.lowpass_hz, gt=0.0, le=500.0)
+    slope_v_per_mm: float = Field(_THC.slope_v_per_mm, gt=1.0, le=20.0)
+    max_speed_mm_s: float = Field(_THC.max_speed_mm_s, gt=0.0, le=100.0)
+    max_accel_mm_s2: float = Field(_THC.max_accel_mm_s2, gt=0.0, le=5000.0)
+    void_slope_v_s: float = Field(_THC.void_slope_v_s, gt=0.0)
     # Follow a steady slow-down once its voltage rise has settled (False: hold Z through it).
-    slow_follow: bool = True
-    slow_follow_max_mm: float = Field(1.5, ge=0.0, le=10.0)
+    slow_follow: bool = _THC.slow_follow
+    slow_follow_max_mm: float = Field(_THC.slow_follow_max_mm, ge=0.0, le=10.0)
 
     def build(self) -> ThcConfig:
         return ThcConfig(**self.model_dump())
 
 
 class ControllerSettings(_Closed):
+    # CutSequence.__init__ starts in this mode (ARC_OK_AND_VOLTAGE), not a SequenceConfig
+    # field, so it cannot be read from one; tests/daemon/test_defaults.py holds them equal.
     mode: Literal[0, 1, 2] = 1
-    probe_height_mm: float = Field(25.0, gt=0.0, le=200.0)
-    float_travel_mm: float = Field(1.5, ge=0.0, le=10.0)
-    ohmic_offset_mm: float = Field(0.0, ge=-5.0, le=5.0)
-    ohmic_retries: int = Field(1, ge=0, le=5)
-    arc_ok_timeout_s: float = Field(3.0, gt=0.0, le=10.0)
-    arc_start_attempts: int = Field(3, ge=1, le=10)
-    arc_retry_delay_s: float = Field(1.0, ge=0.0, le=10.0)
-    arc_lost_delay_s: float = Field(0.02, ge=0.0, le=1.0)
-    thc_delay_s: float = Field(1.0, ge=0.0, le=9.0)
-    safe_height_mm: float = Field(20.0, gt=0.0, le=100.0)
-    pause_at_end_s: float = Field(0.0, ge=0.0, le=5.0)
-    puddle_height_percent: float = Field(100.0, ge=50.0, le=300.0)
-    puddle_delay_s: float = Field(0.0, ge=0.0, le=5.0)
-    ihs_skip_distance_mm: float = Field(0.0, ge=0.0, le=1000.0)
-    ihs_skip_type: Literal[0, 1] = 0
-    dry_run: bool = False
+    probe_height_mm: float = Field(_SEQ.probe_height_mm, gt=0.0, le=200.0)
+    float_travel_mm: float = Field(_SEQ.float_travel_mm, ge=0.0, le=10.0)
+    ohmic_offset_mm: float = Field(_SEQ.ohmic_offset_mm, ge=-5.0, le=5.0)
+    ohmic_retries: int = Field(_SEQ.ohmic_retries, ge=0, le=5)
+    arc_ok_timeout_s: float = Field(_SEQ.arc_ok_timeout_s, gt=0.0, le=10.0)
+    arc_start_attempts: int = Field(_SEQ.arc_start_attempts, ge=1, le=10)
+    arc_retry_delay_s: float = Field(_SEQ.arc_retry_delay_s, ge=0.0, le=10.0)
+    arc_lost_delay_s: float = Field(_SEQ.arc_lost_delay_s, ge=0.0, le=1.0)
+    thc_delay_s: float = Field(_SEQ.thc_delay_s, ge=0.0, le=9.0)
+    safe_height_mm: float = Field(_SEQ.safe_height_mm, gt=0.0, le=100.0)
+    pause_at_end_s: float = Field(_SEQ.pause_at_end_s, ge=0.0, le=5.0)
+    puddle_height_percent: float = Field(_SEQ.puddle_height_percent, ge=50.0, le=300.0)
+    puddle_delay_s: float = Field(_SEQ.puddle_delay_s, ge=0.0, le=5.0)
+    ihs_skip_distance_mm: float = Field(_SEQ.ihs_skip_distance_mm, ge=0.0, le=1000.0)
+    # SequenceConfig types it int; the model narrows it to 0 or 1.
+    ihs_skip_type: Literal[0, 1] = Field(cast(Literal[0, 1], _SEQ.ihs_skip_type))
+    dry_run: bool = _SEQ.dry_run
     thc: ThcSettings = ThcSettings()
 
     def sequence(self) -> SequenceConfig:
@@ -92,6 +118,25 @@ class ControllerSettings(_Closed):
     @property
     def thc_mode(self) -> ThcMode:
         return ThcMode(self.mode)
+
+
+class ControllerConfigs(NamedTuple):
+    """The pure objects a :class:`CutSequence` is built from, and the mode it runs in."""
+
+    sequence: SequenceConfig
+    thc: ThcConfig
+    mode: ThcMode
+
+
+def default_controller_configs() -> ControllerConfigs:
+    """The controller configuration the daemon runs without a file or environment override.
+
+    Built the way ``daemon.build_service`` builds it, from the ``[controller]`` section's
+    defaults (the environment is not read), so a simulation or benchmark runs exactly the
+    daemon's values.
+    """
+    controller = ControllerSettings()
+    return ControllerConfigs(controller.sequence(), controller.thc.build(), controller.thc_mode)
 
 
 class LoggingSettings(_Closed):

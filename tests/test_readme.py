@@ -39,3 +39,36 @@ def test_readme_shows_exactly_the_two_setup_commands() -> None:
     """A newcomer's two commands: make demo and make test."""
     assert "make demo" in README
     assert "make test" in README
+
+
+def _defaults(model: type[BaseModel], prefix: str) -> dict[str, object]:
+    defaults: dict[str, object] = {}
+    for name, field in model.model_fields.items():
+        annotation = field.annotation
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            defaults |= _defaults(annotation, f"{prefix}{name}.")
+        else:
+            defaults[f"{prefix}{name}"] = field.default
+    return defaults
+
+
+def _shown(value: object) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, str):
+        return f'`"{value}"`'
+    return f"`{value!r}`"
+
+
+def test_every_configuration_default_in_the_readme_is_the_models() -> None:
+    """The README's default column shows each key's default as the model has it."""
+    rows = {}
+    for line in README.splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if len(cells) >= 2 and cells[0].startswith("`") and cells[0].endswith("`"):
+            rows[cells[0].strip("`")] = cells[1]
+    defaults = _defaults(DaemonConfig, "")
+    wrong = {
+        key: rows.get(key) for key, value in defaults.items() if rows.get(key) != _shown(value)
+    }
+    assert wrong == {}

@@ -1,8 +1,14 @@
-"""Timing constants of the link, named with their units and injectable (tests shrink them)."""
+"""Timing constants of the link, named with their units and injectable (tests shrink them).
+
+The defaults the wire protocol fixes (window, lease, velocity expiry) are read from
+``firmware_protocol``; the daemon's ``[board]`` section reads its defaults from here.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import firmware_protocol as fp
 
 __all__ = ["LinkTiming"]
 
@@ -11,14 +17,14 @@ __all__ = ["LinkTiming"]
 class LinkTiming:
     ack_timeout_s: float = 0.025  # >= 3x a USB full-speed round trip; raise it on slow UARTs
     max_attempts: int = 5  # first send + 4 retransmissions (PROTOCOL.md §3)
-    window: int = 8  # sequenced commands in flight
-    lease_ms: int = 250
+    window: int = fp.HOST_WINDOW  # sequenced commands in flight
+    lease_ms: int = fp.DEFAULT_LEASE_MS
     handshake_timeout_s: float = 0.5
     clock_sync_period_s: float = 0.9839  # odd period: never in step with other periodic work
     max_consecutive_timeouts: int = 3  # then the link is declared down
     backoff_initial_s: float = 0.2
     backoff_max_s: float = 5.0
-    velocity_expiry_ms: int = 20
+    velocity_expiry_ms: int = fp.DEFAULT_ZVEL_EXPIRY_MS
 
     @property
     def heartbeat_period_s(self) -> float:
