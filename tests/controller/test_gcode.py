@@ -39,7 +39,9 @@ from dthc_bridge.controller.gcode import REQUEST_NAMES, ParsedLine, parse_line, 
 
 SEEDS = Path("/work/shared/seeds")
 MASSO_SEED = SEEDS / "000_4b3df242e51ae6b5.txt"
-VENDORED_SAMPLE = Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs" / "masso_sample.ngc"
+VENDORED_SAMPLE = (
+    Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs" / "masso_sample.ngc"
+)
 
 
 def commands(line: str, **kwargs: int | None) -> tuple[Command, ...]:
