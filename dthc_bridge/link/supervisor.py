@@ -15,6 +15,7 @@ from enum import StrEnum
 
 import structlog
 
+from ..backoff import backoff_delay_s
 from ..transport import TransportError, TransportOpener, open_transport
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
 from .session import BoardSession, ReportCallback, SamplesCallback
@@ -93,9 +94,9 @@ class LinkSupervisor:
 
     def backoff_s(self, failures: int) -> float:
         t = self.timing
-        ceiling = min(t.backoff_max_s, t.backoff_initial_s * 2.0 ** max(0, failures - 1))
-        jitter: float = self.rng.uniform(0.5, 1.0)
-        return ceiling * jitter
+        return backoff_delay_s(
+            failures, initial_s=t.backoff_initial_s, max_s=t.backoff_max_s, rng=self.rng
+        )
 
     async def _connect_once(self) -> BoardSession:
         session = BoardSession(
