@@ -1,17 +1,25 @@
-"""Fault injection on the board's link: what a noisy, flaky USB cable does to the bytes.
+"""Fault injection on a link: what a noisy, flaky USB cable does to the bytes.
 
-The injector sits between the firmware and the link. It sees one frame per ``outgoing``
-call (the firmware writes whole frames) and bytes in any split per ``incoming`` call.
-Scheduled faults (unplug, reboot, stalled acks) are read by the process that owns the
-link; everything here is seeded and deterministic.
+The one place bytes are corrupted for tests and the mock. :class:`LinkFaultInjector` sits
+between a writer and the wire: the mock board's firmware (one frame per ``outgoing`` call,
+bytes in any split per ``incoming`` call) and the tests' in-memory transport (one write
+per ``outgoing`` call). Scheduled faults (unplug, reboot, stalled acks) are read by the
+process that owns the link; everything here is seeded and deterministic.
 """
 
 from __future__ import annotations
 
+import math
 import random
 from dataclasses import dataclass
 
-__all__ = ["FaultPlan", "LinkFaultInjector"]
+__all__ = ["FaultPlan", "LinkFaultInjector", "check_rate"]
+
+
+def check_rate(name: str, rate: float) -> None:
+    """A probability named ``name`` must be within 0..1 (ValueError naming it otherwise)."""
+    if not 0.0 <= rate <= 1.0:
+        raise ValueError(f"{name} must be within 0..1, got {rate}")
 
 
 @dataclass(frozen=True)
@@ -29,8 +37,18 @@ class FaultPlan:
     stall_acks_at_s: float | None = None  # stop answering commands for stall_for_s
     stall_for_s: float = 0.5
 
+    def __post_init__(self) -> None:
+        for name in ("bit_flip_rate", "drop_frame_rate", "garbage_rate"):
+            check_rate(name, getattr(self, name))
+        if self.delay_ms < 0:
+            raise ValueError(f"delay_ms must not be negative, got {self.delay_ms}")
+        if self.garbage_max_bytes < 1:
+            raise ValueError(f"garbage_max_bytes must be at least 1, got {self.garbage_max_bytes}")
+
 
 class LinkFaultInjector:
+    """Applies a plan's drops, garbage and bit flips; counts each."""
+
     def __init__(self, plan: FaultPlan, rng: random.Random) -> None:
         self.plan = plan
         self.rng = rng
@@ -45,10 +63,12 @@ class LinkFaultInjector:
             return data
         rng = self.rng
         out: bytearray | None = None
-        # Geometric skipping: cost proportional to flips, not bytes.
+        # Geometric skipping, cost proportional to flips rather than bytes: the clean bytes
+        # before the next flip are floor(Exp(lam)), geometric with P(flip) = 1 - e^-lam = rate.
+        lam = -math.log1p(-rate) if rate < 1.0 else None
         pos = -1
         while True:
-            pos += 1 + int(rng.expovariate(rate)) if rate < 1.0 else 1
+            pos += 1 if lam is None else 1 + int(rng.expovariate(lam))
             if pos >= len(data):
                 break
             if out is None:

@@ -21,11 +21,12 @@ Dialects understood:
 
 Choices made where the source documents are silent or ambiguous:
 
-* Tokens: a word is a letter (either case) and a number with optional sign and decimals;
-  blanks between words, and between a letter and its number, are optional. ``(...)`` and
-  ``;`` comments are removed and kept in :attr:`ParsedLine.comment` (several are joined with
-  ``"; "``). Anything else (``#1``, ``[...]``, ``/``, ``=``) is refused; a line holding only
-  ``%`` (the program delimiter) is empty.
+* Tokens (:mod:`.words`, shared with the sender, the mock and the bench): a word is a
+  letter (either case) and a number with optional sign and decimals; blanks between words,
+  and between a letter and its number, are optional. ``(...)`` and ``;`` comments are
+  removed and kept in :attr:`ParsedLine.comment` (several are joined with ``"; "``).
+  Anything else (``#1``, ``[...]``, ``/``, ``=``) is refused; a line holding only ``%`` (the
+  program delimiter) is empty.
 * Which command a parameter word belongs to: the G or M word before it; words before the
   first G/M word belong to the first one (so ``F600 M667`` is ``M667 F600``). A plasma
   command refuses any word it does not take, which keeps mixed lines honest
@@ -59,7 +60,6 @@ Choices made where the source documents are silent or ambiguous:
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -86,6 +86,7 @@ from .commands import (
     VoltageMode,
     check_range,
 )
+from .words import GcodeSyntaxError, Tokens, Word, tokenize
 
 __all__ = [
     "MAX_VOLTAGE_STEP_V",
@@ -97,9 +98,6 @@ __all__ = [
 
 MAX_VOLTAGE_STEP_V = 50.0
 """Largest torch up/down step one request may ask for."""
-
-PLASMA_TOOL = 112
-"""MASSO's plasma tool number (``T112 M6``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,77 +121,20 @@ class ParsedLine:
 # --------------------------------------------------------------------------- tokens
 
 
-@dataclass(frozen=True, slots=True)
-class _Word:
-    letter: str  # upper case
-    number: str  # the number as written; "" when the letter has none
-    index: int  # position among the line's tokens (words and comments)
-    start: int  # the word as written is line[start:end]
-    end: int
+def _lex(line: str) -> Tokens:
+    """Words and comments of ``line``; a syntax error is a :class:`CommandError` naming it."""
+    try:
+        return tokenize(line)
+    except GcodeSyntaxError as exc:
+        raise CommandError(exc.text, exc.reason) from None
 
 
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)")
-_NUMBER_CHARS = frozenset("+-.0123456789")
-_BLANKS = frozenset(" \t\r\n\f\v")
-
-
-def _is_letter(ch: str) -> bool:
-    return ch.isascii() and ch.isalpha()
-
-
-def _lex(line: str) -> tuple[list[_Word], list[str]]:
-    """Words and comments of ``line``; refuses stray characters and numbers without letters."""
-    words: list[_Word] = []
-    comments: list[str] = []
-    tokens = 0
-    i, n = 0, len(line)
-    while i < n:
-        ch = line[i]
-        if ch in _BLANKS:
-            i += 1
-        elif ch == "(":
-            end = line.find(")", i + 1)
-            if end < 0:
-                raise CommandError("(", "comment is not closed with ')'")
-            comments.append(line[i + 1 : end].strip())
-            tokens += 1
-            i = end + 1
-        elif ch == ";":
-            comments.append(line[i + 1 :].strip())
-            break
-        elif _is_letter(ch):
-            j = i + 1
-            while j < n and line[j] in " \t":
-                j += 1
-            k = j
-            while k < n and line[k] in _NUMBER_CHARS:
-                k += 1
-            end = k if k > j else i + 1
-            words.append(_Word(ch.upper(), line[j:k], tokens, i, end))
-            tokens += 1
-            i = end
-        elif ch in _NUMBER_CHARS:
-            k = i
-            while k < n and line[k] in _NUMBER_CHARS:
-                k += 1
-            raise CommandError(line[i:k], "number without a letter")
-        elif ch == ")":
-            raise CommandError(")", "')' without '('")
-        else:
-            raise CommandError(ch if ch.isprintable() else repr(ch), "unexpected character")
-    return words, comments
-
-
-def _value(name: str, word: _Word) -> float:
+def _value(name: str, word: Word) -> float:
     """The number of ``word``; errors are named ``name``."""
-    if not word.number:
-        raise CommandError(name, "missing value")
-    if _NUMBER.fullmatch(word.number) is None:
-        raise CommandError(name, f"malformed number {word.number!r}")
-    value = float(word.number)
-    if not math.isfinite(value):
-        raise CommandError(name, "number is too large")
-    return value
+    try:
+        return word.value
+    except GcodeSyntaxError as exc:
+        raise CommandError(name, exc.reason) from None
 
 
 def _whole(name: str, value: float) -> int:
@@ -208,7 +149,7 @@ def _whole(name: str, value: float) -> int:
 class _Params:
     """The parameter words of one plasma command, checked against what it takes."""
 
-    def __init__(self, command: str, words: Sequence[_Word], allowed: str) -> None:
+    def __init__(self, command: str, words: Sequence[Word], allowed: str) -> None:
         self.command = command
         self.values: dict[str, float] = {}
         for word in words:
@@ -251,7 +192,7 @@ class _Params:
         return int(value)
 
 
-def _single(command: str, letter: str, words: Sequence[_Word]) -> tuple[_Word | None, list[_Word]]:
+def _single(command: str, letter: str, words: Sequence[Word]) -> tuple[Word | None, list[Word]]:
     """Split the one ``letter`` word (refusing a second) from the other words."""
     found = [w for w in words if w.letter == letter]
     if len(found) > 1:
@@ -262,7 +203,7 @@ def _single(command: str, letter: str, words: Sequence[_Word]) -> tuple[_Word | 
 # --------------------------------------------------------------------------- MASSO
 
 
-def _g200(words: Sequence[_Word], _line: int | None) -> Command:
+def _g200(words: Sequence[Word], _line: int | None) -> Command:
     p = _Params("G200", words, "FPDCVAOS")
     if not p.values:
         return LegacyMode()
@@ -289,27 +230,27 @@ def _g200(words: Sequence[_Word], _line: int | None) -> Command:
     )
 
 
-def _m3(words: Sequence[_Word], _line: int | None) -> Command:
+def _m3(words: Sequence[Word], _line: int | None) -> Command:
     _Params("M3", words, "")
     return TorchStart()
 
 
-def _m5(words: Sequence[_Word], _line: int | None) -> Command:
+def _m5(words: Sequence[Word], _line: int | None) -> Command:
     _Params("M5", words, "")
     return TorchStop()
 
 
-def _m666(words: Sequence[_Word], _line: int | None) -> Command:
+def _m666(words: Sequence[Word], _line: int | None) -> Command:
     _Params("M666", words, "")
     return ThcEnable(False)
 
 
-def _m667(words: Sequence[_Word], _line: int | None) -> Command:
+def _m667(words: Sequence[Word], _line: int | None) -> Command:
     p = _Params("M667", words, "F")
     return ThcEnable(True, z_feed_mm_min=p.positive("F") if "F" in p.values else None)
 
 
-def _m6(words: Sequence[_Word], _line: int | None) -> Command:
+def _m6(words: Sequence[Word], _line: int | None) -> Command:
     p = _Params("M6", words, "T")
     tool = _whole(p.name("T"), p.require("T"))
     if tool < 0:
@@ -328,7 +269,7 @@ _G100_NOT_PLASMA = {
 }
 
 
-def _g100(words: Sequence[_Word], line: int | None) -> Command:
+def _g100(words: Sequence[Word], line: int | None) -> Command:
     p_word, rest = _single("G100", "P", words)
     if p_word is None:
         raise CommandError("G100 P", "required parameter is missing (selects the function)")
@@ -370,11 +311,11 @@ def _g100(words: Sequence[_Word], line: int | None) -> Command:
 _PLASMAC_OUTPUTS = {1: "arc-OK ignore", 3: "torch disable for over-cut"}
 
 
-def _thc_output(code: int) -> Callable[[Sequence[_Word], int | None], Command]:
+def _thc_output(code: int) -> Callable[[Sequence[Word], int | None], Command]:
     """M62/M64 P2 (THC off) and M63/M65 P2 (THC on); 62/63 wait for the next motion."""
     command = f"M{code}"
 
-    def parse(words: Sequence[_Word], _line: int | None) -> Command:
+    def parse(words: Sequence[Word], _line: int | None) -> Command:
         p = _Params(command, words, "P")
         output = _whole(p.name("P"), p.require("P"))
         if output != 2:
@@ -387,11 +328,11 @@ def _thc_output(code: int) -> Callable[[Sequence[_Word], int | None], Command]:
     return parse
 
 
-def _velocity_reduction(code: int) -> Callable[[Sequence[_Word], int | None], Command]:
+def _velocity_reduction(code: int) -> Callable[[Sequence[Word], int | None], Command]:
     """M67 (with the next motion) / M68 (at once) E3 Q<percent>."""
     command = f"M{code}"
 
-    def parse(words: Sequence[_Word], _line: int | None) -> Command:
+    def parse(words: Sequence[Word], _line: int | None) -> Command:
         p = _Params(command, words, "EQ")
         channel = _whole(p.name("E"), p.require("E"))
         if channel != 3:
@@ -406,7 +347,7 @@ def _velocity_reduction(code: int) -> Callable[[Sequence[_Word], int | None], Co
 
 # --------------------------------------------------------------------------- lines
 
-_Handler = Callable[[Sequence[_Word], int | None], Command]
+_Handler = Callable[[Sequence[Word], int | None], Command]
 
 _PLASMA_G: dict[float, tuple[str, _Handler]] = {
     100.0: ("G100", _g100),
@@ -429,17 +370,17 @@ _PLASMA_M: dict[float, tuple[str, _Handler]] = {
 
 @dataclass(slots=True)
 class _Group:
-    head: _Word | None  # the G/M word; None only for a line without any
+    head: Word | None  # the G/M word; None only for a line without any
     handler: _Handler | None  # None: not a plasma command, the words go to motion
-    params: list[_Word]
+    params: list[Word]
 
 
-def _classify(word: _Word) -> tuple[str, _Handler] | None:
+def _classify(word: Word) -> tuple[str, _Handler] | None:
     table = _PLASMA_G if word.letter == "G" else _PLASMA_M
     return table.get(_value(word.letter, word))
 
 
-def _motion_text(line: str, words: Sequence[_Word]) -> str | None:
+def _motion_text(line: str, words: Sequence[Word]) -> str | None:
     """The kept words as written: runs of adjacent words verbatim, runs joined by one blank."""
     runs: list[str] = []
     first = previous = None
@@ -460,9 +401,9 @@ def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
     ``line_number`` is the caller's position of the line (used when the line has no N word,
     and for ``G100 P0`` resume points). Raises :class:`CommandError` naming the word.
     """
-    if line.strip() == "%":
-        return ParsedLine(line_number=line_number)
-    words, comments = _lex(line)
+    tokens = _lex(line)
+    comments = tokens.comments
+    words = list(tokens.words)
 
     number_words = [w for w in words if w.letter == "N"]
     if len(number_words) > 1:
@@ -478,11 +419,11 @@ def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
     tool_changes = [i for i, kind in heads.items() if kind is not None and kind[0] == "M6"]
     if len(tool_changes) > 1:
         raise CommandError("M6", "more than one tool change on the line")
-    tool_word: _Word | None = None
+    tool_word: Word | None = None
     if tool_changes:
         tool_word, words = _single("M6", "T", words)
 
-    leading: list[_Word] = []
+    leading: list[Word] = []
     groups: list[_Group] = []
     for word in words:
         if word.index in heads:
@@ -498,7 +439,7 @@ def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
         groups.append(_Group(None, None, leading))
 
     commands: list[Command] = []
-    motion: list[_Word] = []
+    motion: list[Word] = []
     resume_line = line_number if line_number is not None else n_word
     for group in groups:
         if group.handler is None:

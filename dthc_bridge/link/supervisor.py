@@ -25,6 +25,7 @@ import structlog
 
 import firmware_protocol as fp
 
+from ..backoff import backoff_delay_s
 from ..transport import TransportError, TransportOpener, open_transport
 from .clock import BoardTimeline
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
@@ -168,9 +169,9 @@ class LinkSupervisor:
 
     def backoff_s(self, failures: int) -> float:
         t = self.timing
-        ceiling = min(t.backoff_max_s, t.backoff_initial_s * 2.0 ** max(0, failures - 1))
-        jitter: float = self.rng.uniform(0.5, 1.0)
-        return ceiling * jitter
+        return backoff_delay_s(
+            failures, initial_s=t.backoff_initial_s, max_s=t.backoff_max_s, rng=self.rng
+        )
 
     async def _connect_once(self) -> BoardSession:
         self.timeline.new_session()

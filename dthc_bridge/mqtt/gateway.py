@@ -29,6 +29,7 @@ from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
+from ..backoff import backoff_delay_s
 from .outbox import Outbox, Outgoing
 from .payloads import (
     GcodeRequest,
@@ -170,11 +171,6 @@ class MqttGateway:
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
 
-    def _backoff_s(self, failures: int) -> float:
-        s = self.settings
-        ceiling = min(s.reconnect_max_s, s.reconnect_initial_s * 2.0 ** max(0, failures - 1))
-        return ceiling * self._rng.uniform(0.5, 1.0)
-
     async def _connection_loop(self) -> None:
         # A fresh Client per attempt rather than one reused Client (aiomqtt's documented
         # pattern): after an unexpected disconnect aiomqtt 2.5 keeps the old CONNACK future,
@@ -196,7 +192,12 @@ class MqttGateway:
                 self._connected.clear()
                 self.stats.disconnects += 1
             failures += 1
-            delay_s = self._backoff_s(failures)
+            delay_s = backoff_delay_s(
+                failures,
+                initial_s=self.settings.reconnect_initial_s,
+                max_s=self.settings.reconnect_max_s,
+                rng=self._rng,
+            )
             log.warning(
                 "mqtt_disconnected", host=self.settings.host, port=self.settings.port,
                 error=error, attempt=failures, retry_in_s=round(delay_s, 3),

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
@@ -37,6 +36,7 @@ from typing import Any
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
+from dthc_bridge.controller.words import words
 from dthc_tools.sim.closed_loop import BATCH_S, ClosedLoop
 from mock_device.plant import list_scenarios, load_scenario
 from mock_device.plant.truth import CutStats
@@ -74,8 +74,6 @@ THC_FEED_MM_MIN = 3000.0  # M667 F3000: 50 mm/s, as the controller tests use
 PIERCE_DELAY_MS = 300.0
 TOUCH_FEED_MM_MIN = 300.0
 
-_WORD = re.compile(r"([A-Z])\s*([-+]?[0-9]*\.?[0-9]+)")
-
 
 @dataclass(frozen=True)
 class CutPlan:
@@ -84,10 +82,6 @@ class CutPlan:
     slow: tuple[str, ...] = ()  # the slowed-down tail, sent after ``lines``
     slow_feed_mm_min: float | None = None
     programmed_feed_mm_min: float | None = None
-
-
-def _words(line: str) -> dict[str, float]:
-    return {k: float(v) for k, v in _WORD.findall(line.split(";", 1)[0].upper())}
 
 
 def plan_cuts(
@@ -104,7 +98,7 @@ def plan_cuts(
     points: list[tuple[float, float]] = []
     end = (x, y)  # where the last cut line ended
     for raw in program:
-        w = _words(raw)
+        w = dict(words(raw))  # the last word of a letter counts
         g = w.get("G")
         if "X" not in w and "Y" not in w:
             continue

@@ -11,7 +11,6 @@ points the program can be restarted from after the operator has re-armed.
 from __future__ import annotations
 
 import asyncio
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,6 +25,7 @@ from dthc_bridge.controller.commands import (
     VelocityReduction,
 )
 from dthc_bridge.controller.gcode import parse_line
+from dthc_bridge.controller.words import Word, tokenize
 
 from .backend import BackendError, MotionBackend
 from .daemon_client import DaemonClient, DaemonError
@@ -34,9 +34,9 @@ __all__ = ["SendReport", "Sender"]
 
 log = structlog.get_logger("dthc_tools.sender")
 
-_HAS_FEED = re.compile(r"(?i)\bF\s*[0-9.]")
-_FEED_WORD = re.compile(r"(?i)\bF\s*([0-9]*\.?[0-9]+)")
-_MODAL_ONLY = re.compile(r"(?i)^\s*(G(17|20|21|40|49|80|90|91|94)\b\s*)+$")
+# Lines holding only these modal G codes (plane, units, offsets, cycles, distance and feed
+# mode) are not passed to the backend.
+_MODAL_ONLY_G = frozenset({17.0, 20.0, 21.0, 40.0, 49.0, 80.0, 90.0, 91.0, 94.0})
 
 
 @dataclass
@@ -131,19 +131,28 @@ class Sender:
                     report.cuts_started += 1
             return
         motion = parsed.motion
-        if not motion or _MODAL_ONLY.match(motion):
+        if motion is None:
             return
-        if _HAS_FEED.search(motion):
+        words = tokenize(motion).words  # parse_line has checked every number
+        if all(w.letter == "G" and w.value in _MODAL_ONLY_G for w in words):
+            return
+        if any(w.letter == "F" for w in words):
             await self.daemon.gcode(motion, line_number=number)  # the programmed feed
-        await self.backend.queue(self._reduced(motion))
+        await self.backend.queue(self._reduced(motion, words))
         report.lines_sent += 1
 
-    def _reduced(self, motion: str) -> str:
+    def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
         """The line as the machine runs it: feed scaled by a velocity reduction."""
         if self.velocity_percent == 100.0:
             return motion
         scale = self.velocity_percent / 100.0
-        return _FEED_WORD.sub(lambda m: f"F{float(m.group(1)) * scale:.1f}", motion)
+        parts: list[str] = []
+        kept = 0  # motion[:kept] is in parts
+        for word in words:
+            if word.letter == "F":
+                parts += [motion[kept : word.start], f"F{word.value * scale:.1f}"]
+                kept = word.end
+        return "".join(parts) + motion[kept:]
 
     async def _wait_motion(self) -> tuple[float, float]:
         """Wait for queued motion to finish, unless the daemon asks for a pause meanwhile."""

@@ -14,16 +14,14 @@ entry speed, so the tangential acceleration never exceeds the limit.
 """
 
 import math
-import re
 from collections import deque
 from collections.abc import Iterable
+
+from dthc_bridge.controller.words import GcodeSyntaxError, words
 
 from .scenario import GantrySpec
 
 __all__ = ["Gantry", "GcodeError", "Segment"]
-
-_WORD = re.compile(r"([A-Z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
-_COMMENT = re.compile(r"\([^)]*\)")
 
 
 class GcodeError(ValueError):
@@ -204,18 +202,18 @@ class Gantry:
         """Parse one G-code line and queue its motion; return the number of segments added.
 
         Understands G0/G1/G2/G3 (X Y, I J, F in units/min), G90/G91, G90.1/G91.1, G20/G21;
-        ignores other words (M, S, T, N, Z, ...). Raises ``GcodeError`` and queues nothing
-        for lines it cannot run.
+        ignores other words (M, S, T, N, Z, ...); words and comments are read as the daemon
+        reads them (:mod:`dthc_bridge.controller.words`). Raises ``GcodeError`` and queues
+        nothing for lines it cannot run.
         """
-        text = _COMMENT.sub(" ", line.split(";", 1)[0]).upper()
-        words = _WORD.findall(text)
-        if _WORD.sub("", text).strip():
-            raise GcodeError(line, "unparseable text")
+        try:
+            pairs = words(line)
+        except GcodeSyntaxError as exc:
+            raise GcodeError(line, f"unparseable text ({exc})") from None
         absolute, arc_abs, units, motion = self._absolute, self._arc_abs, self._units, self._motion
         feed = self._feed_mm_min
         coords: dict[str, float] = {}
-        for letter, number in words:
-            value = float(number)
+        for letter, value in pairs:
             if letter == "G":
                 if value in (0.0, 1.0, 2.0, 3.0):
                     motion = int(value)

@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import random
+from typing import Any
+
+import pytest
+
 import firmware_protocol as fp
-from mock_device.faults import FaultPlan
+from mock_device.faults import FaultPlan, LinkFaultInjector
 from mock_device.sim import SimulatedBoard
 from mock_device.sim_host import SimHost
 from mock_device.variants import DuplicatesActedTwice, LeaseIgnored, WrongCrcVariant
@@ -23,6 +28,34 @@ def test_bit_flips_show_up_as_crc_or_framing_errors() -> None:
     assert board.faults.flipped_bits > 0
     assert stats.crc_errors + stats.framing_errors > 0
     assert stats.frames_ok > 300
+
+
+@pytest.mark.parametrize("rate", [0.01, 0.3, 0.9])
+def test_bit_flip_rate_is_the_probability_per_byte(rate: float) -> None:
+    """Each byte is hit with probability ``rate``, one bit per hit byte."""
+    injector = LinkFaultInjector(FaultPlan(bit_flip_rate=rate), random.Random(5))
+    data = bytes(100_000)
+    out = injector.incoming(data)
+    hit = sum(1 for b in out if b)
+    assert all(bin(b).count("1") <= 1 for b in out)
+    assert hit == injector.flipped_bits
+    assert hit / len(data) == pytest.approx(rate, rel=0.1)
+
+
+@pytest.mark.parametrize(
+    ("plan", "name"),
+    [
+        ({"bit_flip_rate": 1.5}, "bit_flip_rate"),
+        ({"drop_frame_rate": -0.1}, "drop_frame_rate"),
+        ({"garbage_rate": 2.0}, "garbage_rate"),
+        ({"delay_ms": -1.0}, "delay_ms"),
+        ({"garbage_max_bytes": 0}, "garbage_max_bytes"),
+    ],
+)
+def test_a_plan_out_of_range_is_refused_by_name(plan: dict[str, Any], name: str) -> None:
+    """A rate outside 0..1, a negative delay or an empty garbage burst is a configuration error."""
+    with pytest.raises(ValueError, match=name):
+        FaultPlan(**plan)
 
 
 def test_dropped_frames_leave_gaps_in_the_sample_stream() -> None:

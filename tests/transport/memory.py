@@ -2,9 +2,11 @@
 
 :func:`memory_pair` connects two :class:`MemoryTransport` ends back to back. Each end's
 writes pass through that end's :class:`LinkFaults` before reaching the peer: whole writes
-dropped at random, bits flipped at random, bytes delivered one at a time, delivery delayed.
-Randomness is seeded, so a failing run repeats. Every delivery goes through the event loop
-(``call_soon`` / ``call_later``), never from inside ``write``, and keeps the write order.
+dropped at random and bits flipped at random (by the mock's
+:class:`~mock_device.faults.LinkFaultInjector`, the one fault injector), bytes delivered one
+at a time, delivery delayed. Randomness is seeded, so a failing run repeats. Every delivery
+goes through the event loop (``call_soon`` / ``call_later``), never from inside ``write``,
+and keeps the write order.
 
 There is no ``memory://`` link kind in the product: a test hands the link layer an opener
 (``TransportOpener``) that returns the daemon's half of a pair.
@@ -18,6 +20,7 @@ from collections import deque
 from dataclasses import dataclass
 
 from dthc_bridge.transport.base import BytesCallback, LostCallback, Transport, TransportError
+from mock_device.faults import FaultPlan, LinkFaultInjector, check_rate
 
 __all__ = [
     "LinkFaults",
@@ -43,12 +46,15 @@ class LinkFaults:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("loss_rate", "bit_flip_rate"):
-            rate = getattr(self, name)
-            if not 0.0 <= rate <= 1.0:
-                raise ValueError(f"{name} must be within 0..1, got {rate}")
+        check_rate("loss_rate", self.loss_rate)
+        check_rate("bit_flip_rate", self.bit_flip_rate)
         if self.delay_s < 0:
             raise ValueError(f"delay_s must not be negative, got {self.delay_s}")
+
+    def injector(self) -> LinkFaultInjector:
+        """A fresh injector for this direction's losses and bit flips, seeded with ``seed``."""
+        plan = FaultPlan(bit_flip_rate=self.bit_flip_rate, drop_frame_rate=self.loss_rate)
+        return LinkFaultInjector(plan, random.Random(self.seed))
 
 
 class MemoryTransport(Transport):
@@ -63,14 +69,11 @@ class MemoryTransport(Transport):
         faults: LinkFaults | None = None,
     ) -> None:
         self.url = url
-        self.faults = faults if faults is not None else LinkFaults()
-        """Applied to this end's writes; may be replaced while the link runs."""
-        self.writes_dropped = 0
-        self.bytes_corrupted = 0
+        self._faults = faults if faults is not None else LinkFaults()  # for the link's life
+        self._injector = self._faults.injector()
         self._on_bytes = on_bytes
         self._on_lost = on_lost
         self._loop = asyncio.get_running_loop()
-        self._rng = random.Random(self.faults.seed)
         self._peer: MemoryTransport | None = None
         self._outgoing: deque[tuple[int, bytes | None]] = deque()  # None: "I closed"
         self._next_id = 0
@@ -78,9 +81,12 @@ class MemoryTransport(Transport):
         self._reported = False
 
     @property
-    def peer(self) -> MemoryTransport:
-        assert self._peer is not None, "not part of a memory_pair"
-        return self._peer
+    def writes_dropped(self) -> int:
+        return self._injector.dropped_frames
+
+    @property
+    def bytes_corrupted(self) -> int:
+        return self._injector.flipped_bits  # one bit per hit byte
 
     @property
     def is_open(self) -> bool:
@@ -89,19 +95,8 @@ class MemoryTransport(Transport):
     def write(self, data: bytes) -> None:
         if not self._open:
             raise TransportError(self.url, "write on a closed memory link")
-        faults = self.faults
-        if faults.loss_rate and self._rng.random() < faults.loss_rate:
-            self.writes_dropped += 1
-            return
-        payload = bytes(data)
-        if faults.bit_flip_rate:
-            corrupted = bytearray(payload)
-            for i in range(len(corrupted)):
-                if self._rng.random() < faults.bit_flip_rate:
-                    corrupted[i] ^= 1 << self._rng.randrange(8)
-                    self.bytes_corrupted += 1
-            payload = bytes(corrupted)
-        if faults.one_byte_at_a_time:
+        payload = self._injector.outgoing(bytes(data))  # b"" when the write is lost
+        if self._faults.one_byte_at_a_time:
             for i in range(len(payload)):
                 self._send(payload[i : i + 1])
         elif payload:
@@ -132,8 +127,8 @@ class MemoryTransport(Transport):
     def _send(self, item: bytes | None) -> None:
         self._next_id += 1
         self._outgoing.append((self._next_id, item))
-        if self.faults.delay_s > 0:
-            self._loop.call_later(self.faults.delay_s, self._deliver_up_to, self._next_id)
+        if self._faults.delay_s > 0:
+            self._loop.call_later(self._faults.delay_s, self._deliver_up_to, self._next_id)
         else:
             self._loop.call_soon(self._deliver_up_to, self._next_id)
 
