@@ -119,6 +119,10 @@ class ControllerSettings(_Closed):
     def thc_mode(self) -> ThcMode:
         return ThcMode(self.mode)
 
+    def configs(self) -> ControllerConfigs:
+        """What the daemon's controller is built from (see ``daemon.build_controller``)."""
+        return ControllerConfigs(self.sequence(), self.thc.build(), self.thc_mode)
+
 
 class ControllerConfigs(NamedTuple):
     """The pure objects a :class:`CutSequence` is built from, and the mode it runs in."""
@@ -135,8 +139,7 @@ def default_controller_configs() -> ControllerConfigs:
     defaults (the environment is not read), so a simulation or benchmark runs exactly the
     daemon's values.
     """
-    controller = ControllerSettings()
-    return ControllerConfigs(controller.sequence(), controller.thc.build(), controller.thc_mode)
+    return ControllerSettings().configs()
 
 
 class LoggingSettings(_Closed):

@@ -19,7 +19,7 @@ import structlog
 import firmware_protocol as fp
 
 from .board import BoardClient
-from .config import DaemonConfig
+from .config import ControllerConfigs, DaemonConfig
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence
 from .controller.thc import ThcController
@@ -33,13 +33,11 @@ __all__ = ["build_controller", "build_service", "run_daemon"]
 log = structlog.get_logger("dthc_bridge.daemon")
 
 
-def build_controller(config: DaemonConfig) -> PlasmaController:
-    """The pure controller (cut sequence, THC, mode) as the configuration says: the daemon
+def build_controller(configs: ControllerConfigs) -> PlasmaController:
+    """The pure controller (cut sequence, THC, mode) from its configuration: the daemon
     runs it, and so does the closed-loop simulation the benchmarks measure."""
-    sequence = CutSequence(
-        config.controller.sequence(), ThcController(config.controller.thc.build())
-    )
-    sequence.mode = config.controller.thc_mode
+    sequence = CutSequence(configs.sequence, ThcController(configs.thc))
+    sequence.mode = configs.mode
     return PlasmaController(sequence)
 
 
@@ -61,7 +59,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         )
 
     service = ControllerService(
-        build_controller(config), supervisor, client, board_setup=setup,
+        build_controller(config.controller.configs()), supervisor, client, board_setup=setup,
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
     )  # fmt: skip

@@ -20,7 +20,7 @@ from structlog.typing import Processor
 
 from .link import frametrace
 
-__all__ = ["configure_logging"]
+__all__ = ["configure_logging", "logging_configured"]
 
 # Fields every line carries, whether the event came from structlog or from stdlib logging.
 _SHARED_PROCESSORS: tuple[Processor, ...] = (
@@ -85,3 +85,8 @@ def configure_logging(
         cache_logger_on_first_use=False,
     )
     frametrace.enable(frametrace.DEFAULT_CAPACITY if trace_frames else 0)
+
+
+def logging_configured() -> bool:
+    """Whether :func:`configure_logging` has set up the pipeline in this process."""
+    return any(isinstance(h, _PipelineHandler) for h in logging.getLogger().handlers)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import re
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from typing import Any
 
@@ -30,6 +29,7 @@ from .controller.commands import Command, CommandError, CycleStart
 from .controller.gcode import parse_line, parse_request
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence, with_board_limits
+from .controller.words import cutting_feed_mm_min
 from .events import (
     ArcLost,
     BoardFaulted,
@@ -46,8 +46,6 @@ __all__ = ["ControllerService", "EventListener", "feed_samples"]
 
 log = structlog.get_logger("dthc_bridge.service")
 
-_FEED = re.compile(r"(?i)\bF\s*([0-9]*\.?[0-9]+)")
-_CUTTING_MOTION = re.compile(r"(?i)\bG0*[123]\b")
 EVENT_QUEUE_SIZE = 256
 
 EventListener = Callable[[ControllerEvent], None]
@@ -224,10 +222,9 @@ class ControllerService:
         return CommandResult(True, outcome.data)
 
     def _note_feed(self, motion: str) -> None:
-        if _CUTTING_MOTION.search(motion):
-            match = _FEED.search(motion)
-            if match:
-                self._requested_feed_mm_s = float(match.group(1)) / 60.0
+        feed_mm_min = cutting_feed_mm_min(motion)
+        if feed_mm_min is not None:
+            self._requested_feed_mm_s = feed_mm_min / 60.0
 
     # --- actions ---------------------------------------------------------------------------
 

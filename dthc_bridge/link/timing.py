@@ -20,7 +20,6 @@ class LinkTiming:
     window: int = fp.HOST_WINDOW  # sequenced commands in flight
     lease_ms: int = fp.DEFAULT_LEASE_MS
     handshake_timeout_s: float = 0.5
-    clock_sync_period_s: float = 0.9839  # odd period: never in step with other periodic work
     max_consecutive_timeouts: int = 3  # then the link is declared down
     backoff_initial_s: float = 0.2
     backoff_max_s: float = 5.0

@@ -18,6 +18,8 @@ import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
+from dthc_bridge.logs import configure_logging, logging_configured
+
 from . import codec, control, latency, scale, soak
 from .report import print_report, report_header
 
@@ -102,6 +104,8 @@ def run_suite(
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge bench") -> int:
+    if not logging_configured():  # called as a library: stdout is the report's alone
+        configure_logging("warning")
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser(prog).parse_args(argv)
     report = run_suite(args.suite, args, argv, prog)

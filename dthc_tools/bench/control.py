@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+from dthc_bridge.config import default_controller_configs
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
@@ -235,7 +236,10 @@ class ControllerResult:
 
 
 def make_thc(kind: str, reference: ReferenceConfig, ours: ThcConfig | None = None) -> ThcController:
-    return ReferenceThc(reference) if kind == "reference" else ThcController(ours)
+    """``ours`` runs the daemon's THC defaults unless told otherwise."""
+    if kind == "reference":
+        return ReferenceThc(reference)
+    return ThcController(ours or default_controller_configs().thc)
 
 
 def run_controller(

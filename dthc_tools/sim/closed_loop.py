@@ -1,9 +1,9 @@
-"""The daemon's controller service closing the loop over a simulated board, in simulated time.
+"""The daemon's controller service, closing the loop over a simulated board in simulated time.
 
-Not a model of the daemon: the daemon itself. A :class:`~dthc_bridge.service.ControllerService`
-built as ``dthc-bridge run`` builds it (:func:`~dthc_bridge.daemon.build_controller` on a
-default :class:`~dthc_bridge.config.DaemonConfig`), its :class:`~dthc_bridge.link.LinkSupervisor`
-and :class:`~dthc_bridge.board.BoardClient`, talk the wire protocol to a
+Not a model of the daemon: the daemon itself. A ``ControllerService`` built as ``dthc-bridge
+run`` builds it (``daemon.build_controller`` on the daemon's own defaults,
+``config.default_controller_configs``), with its ``LinkSupervisor`` and ``BoardClient``,
+talks the wire protocol to a
 :class:`~mock_device.sim.SimulatedBoard` over :class:`~.link.SimulatedLink`. So the
 actions-to-protocol and reports-to-sequence mappings the benchmarks measure are the
 daemon's own.
@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 import looptime
 
 from dthc_bridge.board import BoardClient
-from dthc_bridge.config import DaemonConfig
+from dthc_bridge.config import BoardSettings, default_controller_configs
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State
 from dthc_bridge.controller.thc import ThcConfig
 from dthc_bridge.daemon import build_controller
@@ -136,11 +136,9 @@ class ClosedLoop:
         config: SequenceConfig | None = None,
         thc: ThcConfig | None = None,
         board: SimulatedBoard | None = None,
-        daemon_config: DaemonConfig | None = None,
     ) -> None:
         self.board = board or SimulatedBoard(scenario, seed=seed)
         self.plant = self.board.plant
-        self.daemon_config = daemon_config or DaemonConfig()
         self.trace = Trace()
         # The feed (mm/min) the sender reports for the motion it sends, when it differs
         # from what the gantry runs (a PlasmaC M67 E3 velocity reduction slows the
@@ -156,16 +154,14 @@ class ClosedLoop:
     # --- wiring ----------------------------------------------------------------------------
 
     async def _start(self, config: SequenceConfig | None, thc: ThcConfig | None) -> None:
-        daemon = self.daemon_config
-        controller = build_controller(daemon)
-        sequence = controller.sequence
-        if config is not None:
-            sequence.config = config
-        if thc is not None:
-            sequence.thc.config = thc
+        # The daemon's own defaults (no file, no environment), where the caller names none.
+        configs = default_controller_configs()
+        controller = build_controller(
+            configs._replace(sequence=config or configs.sequence, thc=thc or configs.thc)
+        )
         runtime = self._runtime
         self.supervisor = LinkSupervisor(
-            "sim://board", daemon.board.timing(), opener=runtime.open_link
+            "sim://board", BoardSettings().timing(), opener=runtime.open_link
         )
         self.client = BoardClient(self.supervisor)
         self.service = ControllerService(controller, self.supervisor, self.client)

@@ -260,7 +260,7 @@ async def test_default_controller_configs_are_what_the_daemon_runs() -> None:
     """build_service(DaemonConfig()) drives a CutSequence with exactly these objects."""
     supervisor, service = build_service(DaemonConfig())
     sequence, thc, mode = default_controller_configs()
-    assert service.seq.config == sequence
-    assert service.seq.thc.config == thc
-    assert service.seq.mode is mode
+    assert service.sequence.config == sequence
+    assert service.sequence.thc.config == thc
+    assert service.sequence.mode is mode
     assert supervisor.timing == DaemonConfig().board.timing() == LinkTiming()
