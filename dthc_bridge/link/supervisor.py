@@ -122,16 +122,18 @@ class LinkSupervisor:
                 listener(*args)
             except Exception as exc:  # invariant 6: a bug is a fault, never the link's end
                 self.stats.handler_errors += 1
-                log.exception(
-                    "board_data_handler_failed",
-                    handler=getattr(listener, "__qualname__", repr(listener)),
-                    data=type(args[0]).__name__ if args else None,
-                )
+                with contextlib.suppress(Exception):  # nor may a failing log line be
+                    log.exception(
+                        "board_data_handler_failed",
+                        handler=getattr(listener, "__qualname__", repr(listener)),
+                        data=type(args[0]).__name__ if args else None,
+                    )
                 for on_error in self._error_listeners:
                     try:
                         on_error(exc)
                     except Exception:  # the fault path itself failed: log it, go on
-                        log.exception("board_data_error_handler_failed")
+                        with contextlib.suppress(Exception):
+                            log.exception("board_data_error_handler_failed")
 
     def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
         self._notify(self._samples_listeners, batch, self.timeline.seconds(t0_board_us))
