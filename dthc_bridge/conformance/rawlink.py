@@ -65,7 +65,7 @@ class RawBoardLink:
         self._loop = asyncio.get_running_loop()
         self.decoder = fp.StreamDecoder()
         self.history: list[Received] = []
-        self.on_samples: Callable[[fp.Samples], None] | None = None
+        self._samples_listeners: list[Callable[[fp.Samples], None]] = []
         self._transport: Transport | None = None
         self._lost: str | None = "not opened"
         self._pending: dict[int, _Pending] = {}
@@ -211,14 +211,18 @@ class RawBoardLink:
 
     # --- receiving -------------------------------------------------------------------------
 
+    def add_samples_listener(self, listener: Callable[[fp.Samples], None]) -> None:
+        """Every SAMPLES batch as it arrives (the suite's motion-window guard)."""
+        self._samples_listeners.append(listener)
+
     def _on_bytes(self, data: bytes) -> None:
         now = self._loop.time()
         for msg in self.decoder.feed(data):
             item = Received(now, msg)
             self.history.append(item)
             if isinstance(msg, fp.Samples):
-                if self.on_samples is not None:
-                    self.on_samples(msg)
+                for listener in self._samples_listeners:
+                    listener(msg)
                 continue
             pending = self._pending.get(msg.seq) if msg.seq else None
             if pending is not None and isinstance(msg, pending.accepts):

@@ -207,7 +207,7 @@ async def _setup(ctx: SuiteContext) -> str | None:
         with contextlib.suppress(LinkError):  # a lost link cannot move Z either
             link.send(fp.ZStop(link.next_seq()))
 
-    link.on_samples = window.guard(stop)
+    link.add_samples_listener(window.guard(stop))
     log.info("conformance_window", window=window.describe())
     return None
 

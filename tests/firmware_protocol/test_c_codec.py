@@ -269,7 +269,7 @@ def test_constants_match_python(c_tool: CTool) -> None:
     for name in constants.__all__:
         value = getattr(constants, name)
         if value is constants.InputMask:  # the host's masks over InputBit, not a wire table
-            assert all(m == 1 << constants.InputBit[m.name] for m in constants.InputMask)
+            assert all(m == 1 << constants.InputBit[str(m.name)] for m in constants.InputMask)
             assert len(constants.InputMask) == len(constants.InputBit)
         elif isinstance(value, type) and issubclass(value, IntEnum | IntFlag):
             assert name in ENUM_PREFIX, f"code table {name} has no C counterpart in this test"
