@@ -57,7 +57,7 @@ class BoardClient:
         self.link.add_state_listener(listener)
 
     def add_error_listener(self, listener: ErrorListener) -> None:
-        """Called when a listener raised while handling board data (invariant 6)."""
+        """Called when a listener raised while handling board data (docs/DESIGN.md invariant 6)."""
         self.link.add_error_listener(listener)
 
     @property

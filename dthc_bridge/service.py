@@ -9,7 +9,7 @@ sequence's replies answer the sender's pending M3/M5.
 Time is the board's: the sequence and the THC run on the sample timestamps (on the link's
 continuous timeline), and a command from the sender takes effect at the latest board time
 seen. A listener bug while handling board data is caught at the link, which calls
-:meth:`_on_handler_error`: the cut ends through the fault path (DESIGN invariant 6).
+:meth:`_on_handler_error`: the cut ends through the fault path (docs/DESIGN.md invariant 6).
 """
 
 from __future__ import annotations
@@ -337,7 +337,8 @@ class ControllerService:
         self.pump()
 
     def _on_handler_error(self, error: Exception) -> None:
-        """A bug while handling board data (invariant 6): end the cut through the fault path.
+        """A bug while handling board data (docs/DESIGN.md invariant 6): end the cut through
+        the fault path.
 
         The sequence may be the part that failed, so what keeps the table safe does not rely
         on it: the torch-off request and a zero Z velocity go out first, directly."""

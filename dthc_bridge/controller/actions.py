@@ -88,7 +88,7 @@ class CommandReply:
 
 
 class PauseCause(StrEnum):
-    FAULT = "fault"  # invariant 3: the cut ended through the fault path
+    FAULT = "fault"  # docs/DESIGN.md invariant 3: the cut ended through the fault path
     ARC_LOST = "arc_lost"  # the same, because the arc went out
     STOP_AFTER_PIERCE = "stop_after_pierce"  # G200 S1: waits for cycle start
 

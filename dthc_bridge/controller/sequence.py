@@ -7,7 +7,7 @@
 Every fault while the torch may be lit (arc lost, breakaway, float/ohmic contact after arc
 OK, Z limit, board fault, link down) ends in FAULTED: torch off, the sender told to pause,
 Z to safe height, touch-off required next time. FAULTED leaves only on an explicit re-arm
-(DESIGN.md invariant 3). No I/O here: the driver executes the actions and reports back.
+(docs/DESIGN.md invariant 3). No I/O here: the driver executes the actions and reports back.
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ class SequenceConfig:
     auto_voltage_window_s: float = 0.03
     at_speed_settle_s: float = 0.15
     dry_run: bool = False
-    # Mode 0 (arc OK from voltage): window and agreement, plasma-facts.md
+    # Mode 0 (arc OK from voltage): window and agreement, docs/plasma-facts.md
     arc_ok_low_v: float = 60.0
     arc_ok_high_v: float = 250.0
     arc_ok_agree_v: float = 10.0
@@ -709,7 +709,8 @@ class CutSequence:
         self._move(self.safe_z_mm, self.config.setup_speed_mm_s)
 
     def _fault(self, reason: str, cause: act.PauseCause = act.PauseCause.FAULT) -> None:
-        """Invariant 3: torch off, sender paused, Z to safe height, touch-off required."""
+        """docs/DESIGN.md invariant 3: torch off, sender paused, Z to safe height, touch-off
+        required."""
         self.error = reason
         self.probe_required = True
         self._enter(State.FAULTED)

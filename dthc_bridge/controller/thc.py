@@ -1,7 +1,7 @@
 """The THC controller: arc-voltage samples and motion state in, a Z velocity out.
 
 A pure object, called once per sample batch. Design, against the complaints users have
-about the open controllers (plasma-facts.md):
+about the open controllers (docs/plasma-facts.md):
 
 - **Noise**: each batch goes through a median-of-three (kills the 1-2 sample spikes of
   high-frequency start) and a first-order low-pass; a small dead band (0.3 V, a third of

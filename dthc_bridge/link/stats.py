@@ -26,7 +26,7 @@ class LinkStats:
     reconnects: int = 0
     reboots: int = 0
     handshakes: int = 0
-    handler_errors: int = 0  # listeners above the link that raised (invariant 6)
+    handler_errors: int = 0  # listeners above the link that raised (docs/DESIGN.md invariant 6)
 
     def observe_rtt(self, rtt_s: float) -> None:
         ms = rtt_s * 1e3

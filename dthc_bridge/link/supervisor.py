@@ -7,7 +7,7 @@ including while the device path does not exist yet (USB cable still unplugged).
 The supervisor is also the link's boundary towards the layers above: they register
 listeners (samples, reports, state changes, handler errors), receive board data stamped
 with board time on one continuous timeline, and a listener that raises is caught here
-(DESIGN invariant 6): logged with its traceback, counted, and reported to the error
+(docs/DESIGN.md invariant 6): logged with its traceback, counted, and reported to the error
 listeners, while the transport and the session carry on.
 """
 

@@ -1,6 +1,6 @@
 """The reference THC: the control law the open controllers share, as a drop-in controller.
 
-Built from plasma-facts.md ("How the open controllers control height") and the plasmac
+Built from docs/plasma-facts.md ("How the open controllers control height") and the plasmac
 description in thc-controllers.md, so the ``control`` benchmark compares control laws on the
 same plant, with the same sequence, THC delay, target voltage and anti-dive hysteresis:
 
@@ -31,7 +31,7 @@ class ReferenceConfig:
     deadband_v: float = 1.0
     gain_mm_s_per_v: float = 1.0
     void_slope_v_s: float = 500.0
-    # plasma-facts.md: threshold per sample = slope x period. plasmac's code multiplies by
+    # docs/plasma-facts.md: threshold per sample = slope x period. plasmac's code multiplies by
     # its on_cycles (2), i.e. 1 V per 1 ms sample: set 2.0 for that variant.
     void_threshold_cycles: float = 2.0
     void_on_samples: int = 3

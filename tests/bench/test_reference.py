@@ -55,7 +55,7 @@ def test_void_lock_after_three_steep_samples_and_unlock_after_ten_quiet() -> Non
 
 
 def test_the_literal_threshold_is_half_a_volt_per_sample() -> None:
-    """``void_threshold_cycles=1``: 500 V/s x 1 ms, as plasma-facts.md words it."""
+    """``void_threshold_cycles=1``: 500 V/s x 1 ms, as docs/plasma-facts.md words it."""
     thc = running(void_threshold_cycles=1.0)
     step(thc, [120.0, 120.7, 121.4, 122.1], 0.004)
     assert Lock.VOID in thc.locks(0.004)

@@ -1,4 +1,5 @@
-"""The controller service wired to a real link: invariant 3 when the link goes mid-cut."""
+"""The controller service wired to a real link: docs/DESIGN.md invariant 3 when the link
+goes mid-cut."""
 
 from __future__ import annotations
 

@@ -83,7 +83,7 @@ def test_named_requests_keep_their_arguments_and_an_empty_payload_is_no_argument
 def test_bad_gcode_payloads_are_refused_with_a_message_naming_the_field(
     payload: bytes, message: str
 ) -> None:
-    """Each kind of bad input has its own clear message (DESIGN invariant 4)."""
+    """Each kind of bad input has its own clear message (docs/DESIGN.md invariant 4)."""
     if len(payload) > LIMIT:
         with pytest.raises(RequestRefused, match="too large"):
             decode_request("gcode", payload, max_payload_bytes=LIMIT)
