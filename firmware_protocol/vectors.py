@@ -25,6 +25,7 @@ from .constants import (
     FaultCode,
     FilterKind,
     InputBit,
+    InputMask,
     MotionResult,
     NakCode,
     ProbeOutcome,
@@ -37,7 +38,7 @@ __all__ = ["VECTORS_PATH", "corrupt_cases", "load", "message_cases", "render"]
 VECTORS_PATH = Path(__file__).with_name("vectors") / "frames.json"
 
 _BOOT_ID = 0x5EED1234
-_PLATE = 1 << InputBit.OHMIC
+_PLATE = InputMask.OHMIC
 
 
 def message_cases() -> list[tuple[str, m.Message]]:
@@ -52,7 +53,7 @@ def message_cases() -> list[tuple[str, m.Message]]:
         ("ohmic_sense_on", m.OhmicSense(6, True)),
         ("z_move_up_to_25mm", m.ZMove(7, 25_000, 50_000)),
         ("z_move_negative_target", m.ZMove(8, -1_500, 1_000)),
-        ("z_probe_float_or_ohmic", m.ZProbe(9, 5_000, 30_000, _PLATE | 1 << InputBit.FLOAT)),
+        ("z_probe_float_or_ohmic", m.ZProbe(9, 5_000, 30_000, _PLATE | InputMask.FLOAT)),
         ("z_velocity_down", m.ZVelocity(0, 1234, -2_500, 20)),
         ("z_velocity_stream_wrap", m.ZVelocity(0, 0xFFFF, 60_000, 200)),
         ("z_stop", m.ZStop(10)),
@@ -119,7 +120,7 @@ def message_cases() -> list[tuple[str, m.Message]]:
                 1_000_000,
                 1000,
                 21_500,
-                1 << InputBit.ARC_OK,
+                InputMask.ARC_OK,
                 1233,
                 XY_SPEED_UNKNOWN,
                 0x01,
@@ -168,7 +169,7 @@ def message_cases() -> list[tuple[str, m.Message]]:
         ("motion_done_reached", m.MotionDone(7, MotionResult.REACHED, 25_000, 4_000_000)),
         (
             "probe_result_float",
-            m.ProbeResult(9, ProbeOutcome.CONTACT, 1 << InputBit.FLOAT, 18_500, 18_430, 5_000_000),
+            m.ProbeResult(9, ProbeOutcome.CONTACT, InputMask.FLOAT, 18_500, 18_430, 5_000_000),
         ),
         (
             "status",

@@ -16,13 +16,13 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 import firmware_protocol as fp
-from firmware_protocol import FaultCode, InputBit, NakCode, StatusBit
+from firmware_protocol import FaultCode, InputMask, NakCode, StatusBit
 
 __all__ = ["BoardFirmware", "BoardIdentity", "PlantPort", "ZAxisPort"]
 
 FAULT_REPORT_PERIOD_US = 250_000
 ADC_COUNTS_PER_VOLT = 100  # the simulated front end: a 16-bit ADC in centivolts
-CONTACT_SENSORS = (1 << InputBit.OHMIC) | (1 << InputBit.FLOAT)
+CONTACT_SENSORS = InputMask.OHMIC | InputMask.FLOAT
 
 
 class ZAxisPort(Protocol):
@@ -425,8 +425,8 @@ class BoardFirmware:
     def _fault_reset(self, msg: fp.FaultReset) -> None:
         mask = msg.mask & self.faults
         still = {
-            FaultCode.BREAKAWAY: bool(self.inputs & (1 << InputBit.BREAKAWAY)),
-            FaultCode.ESTOP: bool(self.inputs & (1 << InputBit.ESTOP)),
+            FaultCode.BREAKAWAY: bool(self.inputs & InputMask.BREAKAWAY),
+            FaultCode.ESTOP: bool(self.inputs & InputMask.ESTOP),
         }
         if mask & (1 << FaultCode.BREAKAWAY) and self.plant.reset_breakaway():
             still[FaultCode.BREAKAWAY] = True
@@ -496,9 +496,9 @@ class BoardFirmware:
     def _check_safety(self) -> None:
         inputs = self.inputs
         self._check_lease()
-        if inputs & (1 << InputBit.BREAKAWAY):
+        if inputs & InputMask.BREAKAWAY:
             self._latch(FaultCode.BREAKAWAY)
-        if inputs & (1 << InputBit.ESTOP):
+        if inputs & InputMask.ESTOP:
             self._latch(FaultCode.ESTOP)
         # A velocity stream driving Z into a soft limit latches Z_LIMIT (PROTOCOL.md §6.1);
         # a probe reaching Z min ends with result LIMIT instead, and a move is clamped.
@@ -507,7 +507,7 @@ class BoardFirmware:
         if into_limit and self.zvel_expiry_us is not None:
             self._latch(FaultCode.Z_LIMIT, 0 if hit == "min" else 1)
         if self.torch_on and self.sampling.arc_lost_ms:
-            if inputs & (1 << InputBit.ARC_OK):
+            if inputs & InputMask.ARC_OK:
                 self.arc_ok_seen = True
                 self.arc_off_since_us = None
             elif self.arc_ok_seen:

@@ -56,8 +56,8 @@ def _fake_metadata(monkeypatch: pytest.MonkeyPatch, installed: set[str]) -> None
             raise metadata.PackageNotFoundError(name)
         return "1.0"
 
-    monkeypatch.setattr(cli.metadata, "requires", lambda _dist: FAKE_REQUIRES)
-    monkeypatch.setattr(cli.metadata, "version", version)
+    monkeypatch.setattr(metadata, "requires", lambda _dist: FAKE_REQUIRES)
+    monkeypatch.setattr(metadata, "version", version)
 
 
 def test_a_missing_extra_is_named_with_what_it_lacks(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -14,7 +14,7 @@ from collections import Counter
 from collections.abc import Callable, Iterable
 
 import firmware_protocol as fp
-from firmware_protocol import Capability, FaultCode, InputBit, StatusBit
+from firmware_protocol import Capability, FaultCode, InputBit, InputMask, StatusBit
 
 from ..link import RequestTimeout, extend_u32
 from .context import InputRecord, SuiteContext, batch_end_us, mm
@@ -170,8 +170,8 @@ async def check_probe_contact(ctx: SuiteContext) -> list[CheckResult]:
     """Z_PROBE stops on a contact input by itself and reports where."""
     link = ctx.link
     opts = ctx.options
-    sensors = (1 << InputBit.OHMIC if ctx.capable(Capability.OHMIC) else 0) | (
-        1 << InputBit.FLOAT if ctx.capable(Capability.FLOAT) else 0
+    sensors = (InputMask.OHMIC if ctx.capable(Capability.OHMIC) else 0) | (
+        InputMask.FLOAT if ctx.capable(Capability.FLOAT) else 0
     )
     if not sensors:
         return [skipped("probe_contact", "skipped: the board has no ohmic or float input")]
@@ -180,7 +180,7 @@ async def check_probe_contact(ctx: SuiteContext) -> list[CheckResult]:
     travel_um = round(opts.probe_max_travel_mm * 1000)
     window.check(start.z_um - travel_um)
     feed_um_s = round(opts.probe_feed_mm_s * 1000)
-    if sensors & (1 << InputBit.OHMIC):
+    if sensors & InputMask.OHMIC:
         await ctx.expect_ack(fp.OhmicSense(0, True))
     before = await ctx.status()
     mark = link.mark()
@@ -192,7 +192,7 @@ async def check_probe_contact(ctx: SuiteContext) -> list[CheckResult]:
     )
     if found is None:
         await ctx.stop_z()
-    if sensors & (1 << InputBit.OHMIC):
+    if sensors & InputMask.OHMIC:
         await ctx.expect_ack(fp.OhmicSense(0, False))
     await ctx.move_z(start.z_um)
     after = await ctx.status()

@@ -76,8 +76,9 @@ from dthc_bridge.controller.sequence import CutSequence, State
 from dthc_bridge.controller.thc import ThcController
 from dthc_bridge.link import LinkError, LinkSupervisor, LinkTiming, extend_u32
 from dthc_bridge.service import ControllerService
-from dthc_bridge.transport import Transport, TransportError, open_transport
+from dthc_bridge.transport import Transport, open_transport
 from dthc_bridge.transport.base import BytesCallback, LostCallback
+from dthc_tools.sim.link import SimulatedLink
 from mock_device.latency_log import read_latency_log
 from mock_device.plant import load_scenario
 from mock_device.sim import SimulatedBoard
@@ -626,51 +627,22 @@ async def _measure_pty_link(
 # --- in-process processing -----------------------------------------------------------------
 
 
-class SimLink(Transport):
-    """A SimulatedBoard in this process, ticked in real time until ``stop_board``.
-
-    Deliveries go through the event loop, never from inside ``write``. After
-    ``stop_board`` the firmware no longer ticks (it still answers requests) and the bench
-    feeds SAMPLES frames itself through ``feed``.
-    """
-
-    url = "sim://bench"
+class SimLink(SimulatedLink):
+    """The simulation's link to a SimulatedBoard, but the board ticks in real time here,
+    until ``stop_board``; after that the firmware no longer ticks (it still answers
+    requests) and the bench feeds SAMPLES frames itself through ``feed``."""
 
     def __init__(self, board: SimulatedBoard, on_bytes: BytesCallback, on_lost: LostCallback):
-        self.board = board
-        self._on_bytes = on_bytes
-        self._on_lost = on_lost
-        self._loop = asyncio.get_running_loop()
-        self._open = True
+        super().__init__(board, on_bytes, on_lost, url="sim://bench")
         self._ticking = True
         self.ticker = self._loop.create_task(self._run(), name="sim-board")
-
-    @property
-    def is_open(self) -> bool:
-        return self._open
-
-    def write(self, data: bytes) -> None:
-        if not self._open:
-            raise TransportError(self.url, "closed")
-        self._loop.call_soon(self._to_board, bytes(data))
-
-    def _to_board(self, data: bytes) -> None:
-        self.board.host_write(data)
-        self._deliver()
-
-    def _deliver(self) -> None:
-        out = self.board.read()
-        if out and self._open:
-            self._on_bytes(out)
 
     def feed(self, frame: bytes) -> None:
         self._on_bytes(frame)
 
     async def close(self) -> None:
-        if self._open:
-            self._open = False
-            self._ticking = False
-            self._on_lost(None)
+        self._ticking = False
+        await super().close()
 
     def stop_board(self) -> None:
         self._ticking = False
@@ -678,7 +650,7 @@ class SimLink(Transport):
     async def _run(self) -> None:
         while self._ticking:
             self.board.tick_due(self._loop.time())
-            self._deliver()
+            self.deliver()
             await asyncio.sleep(0.001)
 
 

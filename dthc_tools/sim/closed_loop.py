@@ -83,7 +83,7 @@ class _Runtime:
         self.events: list[ControllerEvent] = []
 
     async def open_link(self, on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
-        self.link = SimulatedLink(self.board, on_bytes, on_lost)
+        self.link = SimulatedLink(self.board, on_bytes, on_lost, record_velocities=True)
         return self.link
 
     def on_event(self, event: ControllerEvent) -> None:

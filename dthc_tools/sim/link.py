@@ -24,6 +24,8 @@ class SimulatedLink(Transport):
         on_bytes: BytesCallback,
         on_lost: LostCallback,
         url: str = "sim://board",
+        *,
+        record_velocities: bool = False,
     ) -> None:
         self.url = url
         self.board = board
@@ -32,8 +34,9 @@ class SimulatedLink(Transport):
         self._open = True
         self._delivery_scheduled = False
         self._loop = asyncio.get_running_loop()
-        self._host_frames = fp.StreamDecoder()
-        self.velocities_mm_s: list[float] = []  # every Z velocity the daemon commanded
+        # Every Z velocity the daemon commanded, when asked (it decodes what the host sends).
+        self._host_frames = fp.StreamDecoder() if record_velocities else None
+        self.velocities_mm_s: list[float] = []
 
     @property
     def is_open(self) -> bool:
@@ -42,9 +45,10 @@ class SimulatedLink(Transport):
     def write(self, data: bytes) -> None:
         if not self._open:
             raise TransportError(self.url, "write on a closed simulated link")
-        for msg in self._host_frames.feed(data):
-            if isinstance(msg, fp.ZVelocity):
-                self.velocities_mm_s.append(msg.velocity_um_s / 1000)
+        if self._host_frames is not None:
+            for msg in self._host_frames.feed(data):
+                if isinstance(msg, fp.ZVelocity):
+                    self.velocities_mm_s.append(msg.velocity_um_s / 1000)
         self.board.host_write(data)
         if not self._delivery_scheduled:  # the board's answer, in this same instant
             self._delivery_scheduled = True

@@ -89,7 +89,7 @@ def test_input_event_audit_finds_gaps_wrong_snapshots_and_repeated_levels() -> N
     """The audit passes a clean rise/fall of OHMIC (and a FAULT re-report), and names a
     lost event, an event counter used twice, a snapshot whose bit disagrees with the
     level, and an edge that repeats the previous level."""
-    ohmic = 1 << fp.InputBit.OHMIC
+    ohmic = fp.InputMask.OHMIC
     rise = fp.Event(0, 6, 100, fp.InputBit.OHMIC, 1, ohmic, 0)
     fall = fp.Event(0, 7, 200, fp.InputBit.OHMIC, 0, 0, 0)
     clean = InputRecord(_status(5, 0), _status(7, 0), 0, 2, "test")

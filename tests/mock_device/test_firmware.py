@@ -7,7 +7,7 @@ import itertools
 import pytest
 
 import firmware_protocol as fp
-from firmware_protocol import FaultCode, InputBit, NakCode
+from firmware_protocol import FaultCode, InputBit, InputMask, NakCode
 from mock_device.sim import SimulatedBoard
 from mock_device.sim_host import SimHost
 
@@ -224,7 +224,7 @@ def test_probe_reaching_z_min_reports_limit_without_a_fault(host: SimHost) -> No
     host.open_session()
     host.board.plant.zaxis.min_mm = 25.0  # the plate (20 mm) is below the soft limit
     host.request(fp.OhmicSense(0, True))
-    ack = host.request(fp.ZProbe(0, 20_000, 60_000, 1 << InputBit.OHMIC))
+    ack = host.request(fp.ZProbe(0, 20_000, 60_000, InputMask.OHMIC))
     assert isinstance(ack, fp.Ack)
     for _ in range(100):
         host.keep_alive_for(50)
