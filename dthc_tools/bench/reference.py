@@ -1,7 +1,7 @@
 """The reference THC: the control law the open controllers share, as a drop-in controller.
 
-Built from docs/plasma-facts.md ("How the open controllers control height") and the plasmac
-description in thc-controllers.md, so the ``control`` benchmark compares control laws on the
+Built from docs/plasma-facts.md (how the open controllers control height, plasmac among
+them), so the ``control`` benchmark compares control laws on the
 same plant, with the same sequence, THC delay, target voltage and anti-dive hysteresis:
 
 - **Voltage**: the plain mean of each sample batch; no median, no low-pass.
