@@ -632,8 +632,10 @@ class SimLink(SimulatedLink):
     until ``stop_board``; after that the firmware no longer ticks (it still answers
     requests) and the bench feeds SAMPLES frames itself through ``feed``."""
 
+    URL = "sim://bench"
+
     def __init__(self, board: SimulatedBoard, on_bytes: BytesCallback, on_lost: LostCallback):
-        super().__init__(board, on_bytes, on_lost, url="sim://bench")
+        super().__init__(board, on_bytes, on_lost, url=self.URL)
         self._ticking = True
         self.ticker = self._loop.create_task(self._run(), name="sim-board")
 
@@ -739,7 +741,7 @@ async def measure_in_process(
 
         return opener
 
-    rig = build_rig(SimLink.url, opener_factory, 1)
+    rig = build_rig(SimLink.URL, opener_factory, 1)
     results = []
     try:
         await start_cut(rig, scenario)
