@@ -9,6 +9,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+import aiomqtt
+
 from .backend import SimGantryBackend
 from .daemon_client import DaemonClient
 from .sender import Sender
@@ -63,4 +65,11 @@ async def _send(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -> int:
     args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
-    return asyncio.run(_send(args))
+    try:
+        return asyncio.run(_send(args))
+    except aiomqtt.MqttError as exc:
+        print(f"{prog}: cannot reach the broker at {args.broker}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the program file, or the motion backend's port
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
