@@ -110,6 +110,19 @@ def _read_pid(parent: subprocess.Popen[str]) -> Watched:
     return Watched(int(line))
 
 
+def _kill_parent_then_expect_gone(code: str, what: str, *, within_s: float) -> None:
+    """Run ``code`` as a parent that prints its child's pid, SIGKILL the parent, and
+    assert the child is gone within ``within_s``."""
+    with _parent(code) as parent:
+        child = _read_pid(parent)
+        try:
+            parent.kill()
+            took_s = child.wait_gone(within_s)
+            assert took_s is not None, f"{what} outlived its SIGKILLed parent"
+        finally:
+            child.kill()
+
+
 def test_a_child_started_with_die_with_parent_dies_when_its_parent_is_sigkilled() -> None:
     """A parent starts a sleeper with ``preexec_fn=die_with_parent()`` and is SIGKILLed:
     the kernel kills the sleeper (PR_SET_PDEATHSIG) within 2 s, not 60 s later."""
@@ -122,14 +135,7 @@ def test_a_child_started_with_die_with_parent_dies_when_its_parent_is_sigkilled(
         print(child.pid, flush=True)
         time.sleep(60)
     """
-    with _parent(code) as parent:
-        child = _read_pid(parent)
-        try:
-            parent.kill()
-            took_s = child.wait_gone(2.0)
-            assert took_s is not None, "the child outlived its SIGKILLed parent"
-        finally:
-            child.kill()
+    _kill_parent_then_expect_gone(code, "the child", within_s=2.0)
 
 
 @pytest.mark.slow
@@ -186,14 +192,7 @@ def test_a_mock_started_without_the_helper_exits_cleanly_when_its_parent_dies(
         print(mock.pid, flush=True)
         time.sleep(60)
     """
-    with _parent(code) as parent:
-        mock = _read_pid(parent)
-        try:
-            parent.kill()
-            took_s = mock.wait_gone(2.0)
-            assert took_s is not None, "the mock outlived its SIGKILLed parent"
-        finally:
-            mock.kill()
+    _kill_parent_then_expect_gone(code, "the mock", within_s=2.0)
     events = [json.loads(line)["event"] for line in log.read_text().splitlines()]
     assert events[-2:] == ["parent_gone", "exit"]
     assert truth.exists()
