@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, cast
+from typing import Any, Literal, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
@@ -91,7 +91,8 @@ class ThcSettings(_Closed):
 class ControllerSettings(_Closed):
     # CutSequence.__init__ starts in this mode (ARC_OK_AND_VOLTAGE), not a SequenceConfig
     # field, so it cannot be read from one; tests/daemon/test_defaults.py holds them equal.
-    mode: Literal[0, 1, 2] = 1
+    # int with bounds, not Literal[0, 1, 2]: an environment override arrives as text ("0").
+    mode: int = Field(1, ge=0, le=2)
     probe_height_mm: float = Field(_SEQ.probe_height_mm, gt=0.0, le=200.0)
     float_travel_mm: float = Field(_SEQ.float_travel_mm, ge=0.0, le=10.0)
     ohmic_offset_mm: float = Field(_SEQ.ohmic_offset_mm, ge=-5.0, le=5.0)
@@ -107,7 +108,7 @@ class ControllerSettings(_Closed):
     puddle_delay_s: float = Field(_SEQ.puddle_delay_s, ge=0.0, le=5.0)
     ihs_skip_distance_mm: float = Field(_SEQ.ihs_skip_distance_mm, ge=0.0, le=1000.0)
     # SequenceConfig types it int; the model narrows it to 0 or 1.
-    ihs_skip_type: Literal[0, 1] = Field(cast(Literal[0, 1], _SEQ.ihs_skip_type))
+    ihs_skip_type: int = Field(_SEQ.ihs_skip_type, ge=0, le=1)
     dry_run: bool = _SEQ.dry_run
     thc: ThcSettings = ThcSettings()
 

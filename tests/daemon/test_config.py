@@ -7,8 +7,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
-from dthc_bridge.config import ConfigError, load_config
+from dthc_bridge.config import ConfigError, DaemonConfig, load_config
+from dthc_bridge.controller.commands import ThcMode
 
 GOOD = """
 [board]
@@ -102,3 +104,19 @@ def test_slow_down_following_can_be_switched_off(tmp_path: Path) -> None:
     assert thc.slow_follow is False
     assert thc.slow_follow_max_mm == 0.8
     assert load_config(None).controller.thc.build().slow_follow is True
+
+
+def test_integer_choices_can_be_overridden_from_the_environment(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Environment values arrive as text: DTHC_CONTROLLER__MODE=0 selects mode 0 (it was
+    refused as "Input should be 0, 1 or 2"), and out of range is still refused by key."""
+    monkeypatch.setenv("DTHC_CONTROLLER__MODE", "0")
+    monkeypatch.setenv("DTHC_CONTROLLER__IHS_SKIP_TYPE", "1")
+    controller = DaemonConfig().controller
+    assert controller.mode == 0
+    assert controller.thc_mode is ThcMode(0)
+    assert controller.sequence().ihs_skip_type == 1
+    monkeypatch.setenv("DTHC_CONTROLLER__MODE", "3")
+    with pytest.raises(ValidationError, match=r"controller\.mode"):
+        DaemonConfig()
