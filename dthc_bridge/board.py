@@ -34,7 +34,6 @@ def _um(mm: float) -> int:
 class BoardClient:
     def __init__(self, supervisor: LinkSupervisor, *, stream_size: int = 1024) -> None:
         self.link = supervisor
-        self._listeners: list[TelemetryListener] = []
         self._queues: list[asyncio.Queue[Telemetry]] = []
         self._stream_size = stream_size
         # Completions that arrived before anybody waited (an ACK and the report can come in
@@ -42,16 +41,19 @@ class BoardClient:
         self._recent: OrderedDict[tuple[type, int], fp.Message] = OrderedDict()
         self._waiters: dict[tuple[type, int], asyncio.Future[fp.Message]] = {}
         self.last_status: fp.Status | None = None
-        supervisor.add_samples_listener(self._publish)
-        supervisor.add_report_listener(self._on_report)
+        supervisor.add_report_listener(self._on_report)  # completions to their waiters first
+        supervisor.add_samples_listener(self._to_streams)
+        supervisor.add_report_listener(self._to_streams)
         supervisor.add_event_gap_listener(self._on_event_gap)
 
     # --- telemetry -------------------------------------------------------------------------
 
     def add_listener(self, listener: TelemetryListener) -> None:
-        """Every batch and report, on the hot path. A listener that raises is caught at the
-        link (see ``add_error_listener``), so it must not leave the board unattended."""
-        self._listeners.append(listener)
+        """Every batch and report, on the hot path, in registration order. Each listener is
+        called (and guarded) by the link on its own: one that raises is reported to the
+        error listeners (``add_error_listener``) and the others still run."""
+        self.link.add_samples_listener(listener)
+        self.link.add_report_listener(listener)
 
     def add_state_listener(self, listener: StateListener) -> None:
         self.link.add_state_listener(listener)
@@ -65,9 +67,7 @@ class BoardClient:
         """The latest board time seen, in seconds: when a host command takes effect."""
         return self.link.timeline.now_s
 
-    def _publish(self, item: Telemetry, t_s: float) -> None:
-        for listener in self._listeners:
-            listener(item, t_s)
+    def _to_streams(self, item: Telemetry, _t_s: float) -> None:
         for queue in self._queues:
             if queue.full():
                 queue.get_nowait()  # the stream keeps the newest; counted as a gap upstream
@@ -83,7 +83,7 @@ class BoardClient:
         finally:
             self._queues.remove(queue)
 
-    def _on_report(self, msg: fp.Report, t_s: float) -> None:
+    def _on_report(self, msg: fp.Report, _t_s: float) -> None:
         if isinstance(msg, fp.MotionDone | fp.ProbeResult):
             key = (type(msg), msg.seq)
             waiter = self._waiters.pop(key, None)
@@ -93,7 +93,6 @@ class BoardClient:
                 self._recent[key] = msg
                 while len(self._recent) > 16:
                     self._recent.popitem(last=False)
-        self._publish(msg, t_s)
 
     def _on_event_gap(self, missed: int) -> None:
         # A lost edge or fault report: learn the current state instead of guessing.

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from typing import Any
 
@@ -47,6 +48,7 @@ __all__ = ["ControllerService", "EventListener", "feed_samples"]
 log = structlog.get_logger("dthc_bridge.service")
 
 EVENT_QUEUE_SIZE = 256
+TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers keep failing
 
 EventListener = Callable[[ControllerEvent], None]
 
@@ -77,6 +79,8 @@ class ControllerService:
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self.handler_errors = 0
+        self._torch_off: asyncio.Task[None] | None = None
+        self._torch_off_sent_s = -math.inf
         client.add_listener(self._on_board)
         client.add_state_listener(self._on_link_state)
         client.add_error_listener(self._on_handler_error)
@@ -326,10 +330,7 @@ class ControllerService:
             # MQTT rate, not at the sample rate.
             self._last_batch = (t_last, z_mm, xy)
         elif isinstance(item, fp.Event):
-            # An edge may be stamped before the batch just handled: the sequence's clock
-            # only moves forward.
-            t_edge = max(t_s, self._last_batch[0]) if self._last_batch else t_s
-            sequence.on_inputs(item.inputs, item.z_um / 1000, t_edge)
+            sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
         elif isinstance(item, fp.Fault):
             name = _fault_name(item.code)
             self._publish_event(BoardFaulted(t_s, name, item.faults))
@@ -344,7 +345,12 @@ class ControllerService:
         on it: the torch-off request and a zero Z velocity go out first, directly."""
         self.handler_errors += 1
         self._send_velocity(0.0)
-        self._spawn(self._torch_off_quietly())
+        # One torch-off in flight and one per TORCH_OFF_REPEAT_S at most: a bug that fires on
+        # every batch must not fill the board's request window.
+        due = self.now - self._torch_off_sent_s >= TORCH_OFF_REPEAT_S
+        if due and (self._torch_off is None or self._torch_off.done()):
+            self._torch_off_sent_s = self.now
+            self._torch_off = asyncio.create_task(self._torch_off_quietly(), name="torch-off")
         try:
             self.sequence.abort(f"internal error: {type(error).__name__}: {error}")
             self.pump()

@@ -38,7 +38,9 @@ class BoardTimeline:
 
     Within a session it is the board's own clock (plus a constant); when a new session
     starts (a reconnect, or a reboot whose clock starts again at zero) the first stamp of
-    it is placed no earlier than the last stamp seen, so timers never run backwards.
+    it is placed no earlier than the last stamp seen. It never runs backwards: a stamp
+    older than the newest one seen (an input edge inside the batch just handled) reads as
+    the newest, so the sequence's timers and the THC's dt never go negative.
     """
 
     def __init__(self) -> None:
@@ -56,7 +58,9 @@ class BoardTimeline:
             self._anchor_pending = False
             self._offset_us = max(self._offset_us, self._last_us - board_us)
         t_us = board_us + self._offset_us
-        self._last_us = max(self._last_us, t_us)
+        if t_us < self._last_us:
+            return self._last_us * 1e-6  # an edge stamped before the newest batch: now
+        self._last_us = t_us
         return t_us * 1e-6
 
     @property

@@ -83,6 +83,8 @@ class BoardSession:
         self._last_tx_s = 0.0
         self._consecutive_timeouts = 0
         self._last_sample_seq: int | None = None
+        self._last_sample_t0_us: int | None = None
+        self._clock_known = False  # the handshake's CLOCK reply anchors the 32-bit stamps
         self._last_event_counter: int | None = None
         self.lost: asyncio.Future[LinkError] = self._loop.create_future()
         self._trace = new_frame_trace()  # None unless the trace switch is on
@@ -287,14 +289,25 @@ class BoardSession:
     def _on_samples(self, batch: fp.Samples) -> None:
         stats = self.stats
         stats.telemetry_batches += 1
+        if not self._clock_known:
+            return  # before the handshake's CLOCK: its 32-bit stamp cannot be placed yet
         last = self._last_sample_seq
         if last is not None:
             gap = (batch.stream_seq - last - 1) & 0xFFFF
             if gap < 0x8000:
                 stats.telemetry_gaps += gap
         self._last_sample_seq = batch.stream_seq
+        t0_us = self.clock.extend(batch.t0_us)
+        last_t0 = self._last_sample_t0_us
+        if last_t0 is not None and t0_us <= last_t0 and self.boot_id is not None:
+            # A board's samples only move forward: time going back is a reboot that no
+            # reply has shown yet (while cutting, the Z velocity stream is unacknowledged).
+            self.stats.reboots += 1
+            self.fail(BoardRebooted(self.boot_id, None))
+            return
+        self._last_sample_t0_us = t0_us
         if self.on_samples is not None:
-            self.on_samples(batch, self.clock.extend(batch.t0_us))
+            self.on_samples(batch, t0_us)
 
     def _check_boot_id(self, boot_id: int) -> bool:
         if self.boot_id is not None and boot_id != self.boot_id:
@@ -310,6 +323,7 @@ class BoardSession:
             return
         if isinstance(msg, fp.Clock):
             self.clock.last_board_us = max(self.clock.last_board_us, msg.t_us)
+            self._clock_known = True
         pending = self._pending.get(msg.seq)
         if pending is None or pending.report_reply is not None:
             self.stats.duplicate_replies += 1  # a late answer to a retransmitted request
@@ -328,8 +342,14 @@ class BoardSession:
                 return  # before the handshake's STATUS: history, which STATUS summarises
             if not self._count_event(msg.counter):
                 return  # a FAULT re-report (same counter) or an older report: already handled
+        if not isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult):
+            # A host message coming back (an echoing transceiver) or a type this host does
+            # not expect here: counted and dropped, never a reason to end the link.
+            self.stats.unexpected_frames += 1
+            return
+        if not self._clock_known:
+            return  # before the handshake (a fault latched then is in its STATUS)
         if self.on_report is not None:
-            assert isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult)
             self.on_report(msg, self.clock.extend(msg.t_us))
 
     def _count_event(self, counter: int) -> bool:

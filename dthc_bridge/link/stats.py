@@ -26,6 +26,7 @@ class LinkStats:
     reconnects: int = 0
     reboots: int = 0
     handshakes: int = 0
+    unexpected_frames: int = 0  # decoded fine, but not a message a board sends here
     handler_errors: int = 0  # listeners above the link that raised (docs/DESIGN.md invariant 6)
 
     def observe_rtt(self, rtt_s: float) -> None:

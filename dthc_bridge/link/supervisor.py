@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import random
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -44,6 +46,8 @@ __all__ = [
 ]
 
 log = structlog.get_logger("dthc_bridge.link")
+
+HANDLER_ERROR_LOG_PERIOD_S = 1.0  # at most one traceback a second for a repeating bug
 
 
 class LinkState(StrEnum):
@@ -89,6 +93,10 @@ class LinkSupervisor:
         self._state_listeners: list[StateListener] = []
         self._error_listeners: list[ErrorListener] = []
         self.rng = rng or random.Random()
+        self._handler_error_logged_s = -math.inf
+        self._handler_errors_unlogged = 0
+        self._last_boot_id: int | None = None
+        self._reboot_announced = False  # this reboot was reported when its session ended
         self.state = LinkState.OFFLINE
         self.session: BoardSession | None = None
         self.last_error: str = ""
@@ -122,12 +130,7 @@ class LinkSupervisor:
                 listener(*args)
             except Exception as exc:  # invariant 6: a bug is a fault, never the link's end
                 self.stats.handler_errors += 1
-                with contextlib.suppress(Exception):  # nor may a failing log line be
-                    log.exception(
-                        "board_data_handler_failed",
-                        handler=getattr(listener, "__qualname__", repr(listener)),
-                        data=type(args[0]).__name__ if args else None,
-                    )
+                self._log_handler_error(listener, args)
                 for on_error in self._error_listeners:
                     try:
                         on_error(exc)
@@ -135,8 +138,29 @@ class LinkSupervisor:
                         with contextlib.suppress(Exception):
                             log.exception("board_data_error_handler_failed")
 
+    def _log_handler_error(self, listener: Callable[..., None], args: tuple[Any, ...]) -> None:
+        """The traceback of the first failure, then at most one a second: a bug that fires
+        on every batch must not turn the hot path into a stream of tracebacks."""
+        now = time.monotonic()
+        if now - self._handler_error_logged_s < HANDLER_ERROR_LOG_PERIOD_S:
+            self._handler_errors_unlogged += 1
+            return
+        self._handler_error_logged_s = now
+        unlogged, self._handler_errors_unlogged = self._handler_errors_unlogged, 0
+        with contextlib.suppress(Exception):  # nor may a failing log line end the link
+            log.exception(
+                "board_data_handler_failed",
+                handler=getattr(listener, "__qualname__", repr(listener)),
+                data=type(args[0]).__name__ if args else None,
+                not_logged_since_last=unlogged,
+            )
+
     def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
-        self._notify(self._samples_listeners, batch, self.timeline.seconds(t0_board_us))
+        t0_s = self.timeline.seconds(t0_board_us)
+        # The batch is handled at its last sample's time: a command arriving next takes
+        # effect then, not (n - 1) periods earlier.
+        self.timeline.seconds(t0_board_us + batch.period_us * (len(batch.samples_cv) - 1))
+        self._notify(self._samples_listeners, batch, t0_s)
 
     def _on_report(self, report: fp.Report, board_us: int) -> None:
         self._notify(self._report_listeners, report, self.timeline.seconds(board_us))
@@ -211,7 +235,16 @@ class LinkSupervisor:
                     if self.stats.handshakes > 1:
                         self.stats.reconnects += 1
                     self.session = session
-                    self._set_state(LinkState.ONLINE, "handshake complete")
+                    # A board that rebooted while the link was down (a USB board drops off
+                    # the bus first) shows it only by a new boot id.
+                    rebooted = (
+                        self._last_boot_id is not None
+                        and session.boot_id != self._last_boot_id
+                        and not self._reboot_announced
+                    )
+                    self._last_boot_id = session.boot_id
+                    self._reboot_announced = False
+                    self._set_state(LinkState.ONLINE, "handshake complete", board_rebooted=rebooted)
                     keep_alive = asyncio.create_task(session.keep_alive(), name="link-keepalive")
                     try:
                         error = await session.lost
@@ -222,6 +255,7 @@ class LinkSupervisor:
                     await session.close()
                     self.last_error = str(error)
                     rebooted = isinstance(error, BoardRebooted)
+                    self._reboot_announced = rebooted
                     reason = "board_rebooted" if rebooted else str(error)
                     self._set_state(LinkState.OFFLINE, reason, board_rebooted=rebooted)
                     if rebooted:

@@ -236,3 +236,13 @@ async def test_a_fault_latched_before_the_session_comes_from_status_not_reports(
     assert session.initial_status.faults & (1 << fp.FaultCode.LEASE_EXPIRED)
     await asyncio.sleep(0.6)  # two or three re-reports of the same fault
     assert not [m for m in reports if isinstance(m, fp.Fault)]
+
+
+async def test_a_host_frame_coming_back_is_counted_not_fatal(rig: Rig) -> None:
+    """An echoing transceiver returns the host's own frames: each is counted as unexpected
+    and dropped; the session stays up and keeps answering."""
+    session = await rig.supervisor.wait_online(2.0)
+    session._on_bytes(fp.encode(fp.Heartbeat(3)) + fp.encode(fp.Torch(4, False)))
+    assert rig.supervisor.stats.unexpected_frames == 2
+    assert session.is_up
+    assert isinstance(await rig.client.status(), fp.Status)

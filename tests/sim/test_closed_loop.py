@@ -5,11 +5,14 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+import structlog
 
 import firmware_protocol as fp
 from dthc_bridge.board import Telemetry
 from dthc_bridge.config import DaemonConfig
+from dthc_bridge.controller.sequence import State
 from dthc_bridge.daemon import build_service
+from dthc_bridge.events import BoardRestarted
 from dthc_bridge.service import ControllerService
 from dthc_tools.bench.control import BenchLoop, make_thc
 from dthc_tools.bench.reference import ReferenceConfig
@@ -84,4 +87,63 @@ def test_the_simulation_goes_through_the_wire_protocol() -> None:
     assert loop.velocities
     assert loop.m5().ok
     assert not loop.plant.torch_on
+    loop.close()
+
+
+def _cutting(scenario: str = "flat_clean", seed: int = 4) -> ClosedLoop:
+    loop = ClosedLoop(scenario, seed=seed)
+    for line in ("T112 M6", "G200 F300 P3.8 D300 C1.5 V125 A90 O1 S0", "M667 F3000"):
+        assert loop.gcode(line).ok
+    loop.plant.gantry.feed_line("G0 X50 Y50")
+    assert loop.run_until(lambda: loop.plant.gantry.idle, 10)
+    assert loop.m3().ok
+    return loop
+
+
+def test_a_reboot_no_reply_has_shown_ends_the_cut_at_once() -> None:
+    """While cutting only unacknowledged Z velocities go out, so no reply carries the new
+    boot id: the board's clock going back is the reboot. The cut faults within a batch or
+    two, the sender is paused, the board's restart is reported, and the sequence's clock
+    never runs backwards."""
+    loop = _cutting()
+    loop.plant.gantry.feed_line("G1 X300 Y50 F5500")
+    loop.run_until(lambda: False, 1.0)
+    times: list[float] = []
+    loop.client.add_listener(lambda _item, _t: times.append(loop.sequence.now))
+    loop.board.reboot()
+    assert loop.run_until(lambda: loop.sequence.state is State.FAULTED, 0.02)
+    assert any(isinstance(e, BoardRestarted) for e in loop.events)
+    assert loop.pauses
+    assert times == sorted(times)
+    loop.close()
+
+
+def test_a_bug_on_every_batch_is_one_traceback_and_one_torch_off() -> None:
+    """A THC that raises on every batch for a second of board time: every failure is
+    counted, the cut ends once, one traceback is logged (the rest counted) and direct
+    torch-off requests go out ten times a second, not 200."""
+    loop = _cutting(seed=5)
+    requests_before = loop.supervisor.stats.requests
+
+    def broken(*_args: object) -> float:
+        raise ZeroDivisionError("a bug on every batch")
+
+    loop.sequence.thc.filter = broken  # type: ignore[method-assign,assignment]
+    with structlog.testing.capture_logs() as logs:
+        loop.run_until(lambda: False, 1.0)
+    assert loop.service.handler_errors >= 150
+    assert loop.sequence.state is State.FAULTED
+    assert len([e for e in logs if e["event"] == "board_data_handler_failed"]) == 1
+    # torch-offs at 10/s plus the fault path's own requests, not one per batch
+    assert loop.supervisor.stats.requests - requests_before < 25
+    assert not loop.plant.torch_on
+    loop.close()
+
+
+def test_a_command_takes_effect_at_the_newest_sample() -> None:
+    """The sequence's clock for a command is the last sample's board time, so a timer a
+    command starts does not begin (n - 1) sample periods in the past."""
+    loop = ClosedLoop("flat_clean", seed=6)
+    loop.step()
+    assert loop.service.now == pytest.approx(loop.board.t_s, abs=1e-9)
     loop.close()
