@@ -45,6 +45,7 @@ from .payloads import (
 from .port import CommandResult, ControllerPort
 from .settings import MqttSettings
 from .topics import REQUEST_NAME, topic_error
+from .transactions import TransactionCache
 
 __all__ = ["GatewayStats", "MqttGateway"]
 
@@ -76,6 +77,7 @@ class GatewayStats:
     inflight: int = 0
     outbox: int = 0
     sender_lost: int = 0
+    repeated: int = 0  # a transaction seen before: answered, not executed again
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -109,6 +111,9 @@ class MqttGateway:
         self._outbox = Outbox(settings.outbox_max_messages, settings.outbox_hold_s)
         self._slots = asyncio.Semaphore(settings.max_concurrent_requests)
         self._inflight: set[asyncio.Task[None]] = set()
+        self._transactions: TransactionCache[_Reply] = TransactionCache(
+            settings.transaction_cache_size, settings.transaction_cache_s
+        )
         self._background: set[asyncio.Task[None]] = set()
         self._connected = asyncio.Event()
         self._last_state: bytes | None = None
@@ -321,8 +326,14 @@ class MqttGateway:
             self._refuse(reply, exc.reason)
             return
         reply.transaction = request.transaction
+        if request.transaction is not None and not self._admit(
+            reply, request.transaction, bytes(message.payload), loop.time()
+        ):
+            return
         if len(self._inflight) >= self.settings.max_pending_requests:
             self._refuse(reply, f"busy: {len(self._inflight)} requests in progress")
+            if request.transaction is not None:  # not executed: a retry may run it
+                self._transactions.forget(name, request.transaction)
             return
         deadline_s = self.settings.request_deadline_s
         if request.deadline_s is not None:
@@ -333,6 +344,28 @@ class MqttGateway:
         )
         self._inflight.add(task)
         task.add_done_callback(self._inflight.discard)
+
+    def _admit(self, reply: _Reply, transaction: Transaction, payload: bytes, now_s: float) -> bool:
+        """True to execute; False for a repeat (answered now or when the first copy ends)
+        or a transaction reused for another request (refused)."""
+        seen = self._transactions.admit(reply.name, transaction, payload, reply, now_s)
+        if seen.run:
+            return True
+        if seen.conflict:
+            self._refuse(
+                reply,
+                f"transaction {transaction!r} was already used for a different "
+                f"{reply.name} request: use a new transaction for a new request",
+            )
+            return False
+        self.stats.repeated += 1
+        log.info(
+            "mqtt_request_repeated", name=reply.name, transaction=transaction,
+            answered=seen.result is not None,
+        )  # fmt: skip
+        if seen.result is not None:
+            self._respond(reply, seen.result)
+        return False
 
     def _refuse(self, reply: _Reply, reason: str) -> None:
         self.stats.refused += 1
@@ -359,13 +392,21 @@ class MqttGateway:
                     False, error="timeout" if started else "timeout: not started"
                 )
         except asyncio.CancelledError:
-            self._respond(reply, CommandResult(False, error="cancelled: the daemon is stopping"))
+            self._answer(reply, CommandResult(False, error="cancelled: the daemon is stopping"))
             raise
         except Exception as exc:
             result = _internal_error(reply.name, exc)
         if not isinstance(result, CommandResult):  # a broken controller is still answered
             result = _internal_error(reply.name, TypeError(f"controller returned {result!r}"))
+        self._answer(reply, result)
+
+    def _answer(self, reply: _Reply, result: CommandResult) -> None:
+        """The executed request's response, and the same for each repeat that waited."""
         self._respond(reply, result)
+        if reply.transaction is not None:
+            now_s = asyncio.get_running_loop().time()
+            for waiting in self._transactions.finish(reply.name, reply.transaction, result, now_s):
+                self._respond(waiting, result)
 
     async def _execute(self, name: str, request: GcodeRequest | Request) -> CommandResult:
         if isinstance(request, GcodeRequest):

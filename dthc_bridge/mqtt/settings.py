@@ -74,6 +74,13 @@ class MqttSettings(BaseModel):
         description="how long responses and events wait for the broker",
     )
     outbox_max_messages: int = Field(default=1000, ge=10, le=100_000)
+    transaction_cache_size: int = Field(
+        default=1024, ge=0, le=100_000,
+        description="answered requests kept by transaction, so a repeat is not run twice",
+    )  # fmt: skip
+    transaction_cache_s: float = Field(
+        default=600.0, ge=0.0, le=86_400.0, description="how long an answer is kept for repeats"
+    )
 
     @field_validator("sender_will_topic")
     @classmethod

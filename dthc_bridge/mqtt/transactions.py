@@ -1,0 +1,105 @@
+"""Exactly-once requests: a repeated transaction is answered, never executed again.
+
+A sender whose response did not arrive (the broker restarted, its client reconnected)
+sends the same request again with the same ``transaction``. Executing it twice could light
+the torch twice, so the gateway keeps, per (request name, transaction):
+
+- while the first copy executes: the repeats, answered with its result when it ends;
+- after it ended: its result, for ``hold_s`` and at most ``size`` entries, so a repeat is
+  answered from here.
+
+The same transaction with a different payload is a sender bug and is refused. Requests
+without a transaction cannot be recognised, so they are executed each time (documented
+for sender authors in the README).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+from .payloads import Transaction
+from .port import CommandResult
+
+__all__ = ["Seen", "TransactionCache"]
+
+_W = TypeVar("_W")  # whatever the gateway needs to answer a waiting repeat
+
+
+@dataclass
+class _Entry(Generic[_W]):
+    digest: bytes
+    result: CommandResult | None = None  # None while the first copy executes
+    done_s: float = 0.0
+    waiting: list[_W] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Seen:
+    """What to do with a request: ``run`` it, or it is a repeat (answered or waiting)."""
+
+    run: bool
+    result: CommandResult | None = None  # a repeat of a request that already ended
+    conflict: bool = False  # the transaction was used for a different request
+
+
+class TransactionCache(Generic[_W]):
+    def __init__(self, size: int, hold_s: float) -> None:
+        self.size = size
+        self.hold_s = hold_s
+        self._entries: OrderedDict[tuple[str, str], _Entry[_W]] = OrderedDict()
+
+    @staticmethod
+    def _key(name: str, transaction: Transaction) -> tuple[str, str]:
+        # 17 and "17" are one transaction to a sender that retries with JSON round trips.
+        return name, str(transaction)
+
+    def admit(
+        self, name: str, transaction: Transaction, payload: bytes, waiter: _W, now_s: float
+    ) -> Seen:
+        """First sight: remember it and run it. A repeat: its result, or wait for it."""
+        self._expire(now_s)
+        key = self._key(name, transaction)
+        digest = hashlib.blake2b(payload, digest_size=16).digest()
+        entry = self._entries.get(key)
+        if entry is None:
+            if self.size > 0:
+                self._entries[key] = _Entry(digest)
+            return Seen(run=True)
+        if entry.digest != digest:
+            return Seen(run=False, conflict=True)
+        if entry.result is None:
+            entry.waiting.append(waiter)
+            return Seen(run=False)
+        return Seen(run=False, result=entry.result)
+
+    def finish(
+        self, name: str, transaction: Transaction, result: CommandResult, now_s: float
+    ) -> list[_W]:
+        """The first copy ended: keep its result; the repeats that waited for it."""
+        entry = self._entries.get(self._key(name, transaction))
+        if entry is None:
+            return []
+        entry.result, entry.done_s = result, now_s
+        waiting, entry.waiting = entry.waiting, []
+        self._expire(now_s)
+        return waiting
+
+    def forget(self, name: str, transaction: Transaction) -> list[_W]:
+        """The first copy was not executed after all (refused busy): a repeat may run."""
+        entry = self._entries.pop(self._key(name, transaction), None)
+        return [] if entry is None else entry.waiting
+
+    def _expire(self, now_s: float) -> None:
+        entries = self._entries
+        for key in list(entries):  # oldest first
+            entry = entries[key]
+            if entry.result is None:
+                continue  # still running: its repeats wait on it
+            if now_s - entry.done_s > self.hold_s or len(entries) > self.size:
+                del entries[key]
+
+    def __len__(self) -> int:
+        return len(self._entries)
