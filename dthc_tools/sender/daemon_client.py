@@ -40,6 +40,10 @@ class DaemonClient:
             identifier=f"dthc-sender-{uuid.uuid4().hex[:8]}", timeout=10.0,
         )  # fmt: skip
         self._ids = itertools.count(1)
+        # Transactions are unique per run: the daemon answers a repeated transaction from
+        # its cache instead of running it (exactly-once), so a second run must not reuse
+        # the first run's "s1", "s2", ...
+        self._run_id = uuid.uuid4().hex[:8]
         self._waiting: dict[str, asyncio.Future[dict[str, Any]]] = {}
         self._event_handlers: list[Callable[[dict[str, Any]], None]] = []
         self._task: asyncio.Task[None] | None = None
@@ -92,7 +96,7 @@ class DaemonClient:
             await asyncio.wait_for(self._online.wait(), self.timeout_s)
         except TimeoutError:
             raise DaemonError(f"{name}: the daemon is not online") from None
-        transaction = f"s{next(self._ids)}"
+        transaction = f"{self._run_id}-{next(self._ids)}"
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._waiting[transaction] = future
         payload = {**args, "transaction": transaction}

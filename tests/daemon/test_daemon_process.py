@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import signal
 import time
+import uuid
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -28,13 +29,14 @@ class Stack:
         self.probe = probe
         self.base = base
         self.n = 0
+        self.run_id = uuid.uuid4().hex[:6]  # transactions unique per sender run (exactly-once)
 
     def topic(self, leaf: str) -> str:
         return f"{self.base}/t1/{leaf}"
 
     async def gcode(self, line: str, timeout_s: float = 20.0) -> dict[str, Any]:
         self.n += 1
-        transaction = f"tx{self.n}"
+        transaction = f"{self.run_id}-tx{self.n}"
         start = len(self.probe.messages)
         await self.probe.publish_json(
             self.topic("request/gcode"), {"line": line, "transaction": transaction}
