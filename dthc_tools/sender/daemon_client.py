@@ -46,6 +46,7 @@ class DaemonClient:
         self._run_id = uuid.uuid4().hex[:8]
         self._waiting: dict[str, asyncio.Future[dict[str, Any]]] = {}
         self._event_handlers: list[Callable[[dict[str, Any]], None]] = []
+        self._offline_handlers: list[Callable[[], None]] = []
         self._task: asyncio.Task[None] | None = None
         # A request published while the daemon is not subscribed would be dropped by the
         # broker: wait for its availability (retained, republished on every reconnect).
@@ -68,6 +69,18 @@ class DaemonClient:
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         self._event_handlers.append(handler)
 
+    def on_offline(self, handler: Callable[[], None]) -> None:
+        """The daemon's availability turned offline (killed, crashed or stopped)."""
+        self._offline_handlers.append(handler)
+
+    def _went_offline(self) -> None:
+        """Nobody will answer what is pending: fail it now, not after the timeout."""
+        for waiter in self._waiting.values():
+            if not waiter.done():
+                waiter.set_exception(DaemonError("the daemon went offline"))
+        for handler in self._offline_handlers:
+            handler()
+
     async def _pump(self) -> None:
         async for message in self._client.messages:
             try:
@@ -79,8 +92,9 @@ class DaemonClient:
             if message.topic.matches(f"{self.root}/availability"):
                 if document.get("state") == "online":
                     self._online.set()
-                else:
+                elif self._online.is_set():  # online -> offline: its will, or a clean stop
                     self._online.clear()
+                    self._went_offline()
                 continue
             if message.topic.matches(f"{self.root}/event"):
                 for handler in self._event_handlers:

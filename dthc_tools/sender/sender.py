@@ -4,7 +4,8 @@ Plasma lines go to the daemon (in program order: after the motion queued before 
 finished) and the sender waits for each answer; M3 returns when XY motion may start.
 Motion lines go to the backend, and lines with a feed also to the daemon, which uses the
 programmed feed as the anti-dive reference. A pause request from the daemon (arc lost, a
-fault) holds the motion and stops the program; RosettaCNC ``G100 P0`` lines are resume
+fault), or the daemon going offline, holds the motion and stops the program at once;
+RosettaCNC ``G100 P0`` lines are resume
 points the program can be restarted from after the operator has re-armed.
 """
 
@@ -78,6 +79,12 @@ class Sender:
         self._pause_reason = ""
         self.velocity_percent = 100.0  # PlasmaC M67/M68 E3: the machine runs slower
         daemon.on_event(self._on_event)
+        daemon.on_offline(self._on_daemon_offline)
+
+    def _on_daemon_offline(self) -> None:
+        # Torch and Z are the daemon's: without it, motion must not go on with a cut.
+        self._pause_reason = "the daemon went offline"
+        self._pause.set()
 
     def _on_event(self, event: dict[str, Any]) -> None:
         if event.get("type") in ("pause", "arc_lost"):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+import time
 from pathlib import Path
 
 import pytest
@@ -67,3 +69,28 @@ async def test_arc_lost_pauses_the_program_and_reports_the_resume_point(tmp_path
     assert sender["resume_from"] == 6
     assert summary["safety_violations"] == 0
     assert summary["torch_on_at_exit"] is False
+
+
+async def test_a_daemon_killed_mid_cut_stops_the_sender_at_once(tmp_path: Path) -> None:
+    """SIGKILL the daemon mid-cut: its will turns availability offline, the sender holds
+    motion and stops the program within seconds, naming why (it waited for its request's
+    timeout before); the board's lease has turned the torch off."""
+    options = StackOptions(tmp_path, scenario="masso_warped", broker="mosquitto")
+    async with Stack(options) as stack:
+        sending = asyncio.create_task(stack.send(program_lines("masso_sample")))
+        for _ in range(600):
+            if any(point.get("state") == "cutting" for point in stack.telemetry):
+                break
+            await asyncio.sleep(0.05)
+        assert stack.daemon is not None
+        stack.daemon.kill()
+        killed_s = time.monotonic()
+        report = await asyncio.wait_for(sending, 30)
+        stopped_after_s = time.monotonic() - killed_s
+        result = await stack.finish(report)
+    assert not report.ok
+    assert "the daemon went offline" in report.error
+    assert stopped_after_s < 5.0, stopped_after_s
+    assert result.mock_exit["torch_on"] is False
+    assert result.mock_exit["unsafe_torch_ms"] == 0
+    assert result.mock_exit["violations"] == {}
