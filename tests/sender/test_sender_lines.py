@@ -19,6 +19,9 @@ class FakeDaemon:
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         pass
 
+    def on_offline(self, handler: Callable[[], None]) -> None:
+        pass
+
     async def gcode(
         self, line: str, *, line_number: int | None = None, xy: tuple[float, float] | None = None
     ) -> dict[str, Any]:
