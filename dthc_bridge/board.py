@@ -22,7 +22,7 @@ from .link.supervisor import ErrorListener, StateListener
 __all__ = ["BoardClient", "Telemetry", "TelemetryListener"]
 
 Telemetry = fp.Samples | fp.Report
-# An item and its board time in seconds (SAMPLES: of the first sample).
+# An item and its board time in seconds (SAMPLES: of its last sample).
 TelemetryListener = Callable[[Telemetry, float], None]
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
 

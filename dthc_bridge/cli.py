@@ -109,7 +109,10 @@ _EXTRA_MARKER = re.compile(r"""extra\s*==\s*["']([^"']+)["']""")
 
 def missing_for_extra(extra: str, distribution: str = DISTRIBUTION) -> list[str]:
     """The distributions ``extra`` needs that are not installed, read from the package's
-    own metadata (pyproject.toml is the one list), following extras of extras."""
+    own metadata (pyproject.toml is the one list), following extras of extras.
+
+    Parsed by hand, narrowly (a name, optional [extras], an ``extra == "..."`` marker):
+    ``packaging`` would do it fully but is not a runtime dependency of the daemon."""
     try:
         requirements = metadata.requires(distribution) or []
     except metadata.PackageNotFoundError:

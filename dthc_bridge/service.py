@@ -78,7 +78,6 @@ class ControllerService:
         self._requested_feed_mm_s: float | None = None
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
-        self.handler_errors = 0
         self._torch_off: asyncio.Task[None] | None = None
         self._torch_off_sent_s = -math.inf
         client.add_listener(self._on_board)
@@ -132,6 +131,11 @@ class ControllerService:
             None if point is None else {"line": point.line, "index": point.index}
         )
         return state
+
+    @property
+    def handler_errors(self) -> int:
+        """Bugs caught while handling board data (counted by the link, invariant 6)."""
+        return self.supervisor.stats.handler_errors
 
     def link_state(self) -> tuple[str, str]:
         return self._link
@@ -188,20 +192,14 @@ class ControllerService:
         if isinstance(command, CycleStart):
             # Cycle start answers the M3 that waits for it (G200 S1): queued behind that M3
             # it would wait for itself. It never defers, so it needs no turn.
-            return self._execute_now(command, xy_mm)
+            result = self._apply(command, xy_mm)
+            assert result is not None
+            return result
         async with self._command_lock:  # one plasma command at a time, in arrival order
-            try:
-                outcome = self.controller.handle(command, self.now, xy_mm)
-            except CommandError as exc:
-                return CommandResult(False, error=str(exc))
-            point = outcome.resume_point
-            if point is not None:
-                self._publish_event(ResumePointMarked(self.now, point.line, point.index))
-            if not outcome.deferred:
-                self.pump()
-                return CommandResult(True, outcome.data)
-            self._reply = self._loop.create_future()
-            self.pump()
+            result = self._apply(command, xy_mm)
+            if result is not None:
+                return result
+            assert self._reply is not None
             try:
                 reply = await asyncio.wait_for(asyncio.shield(self._reply), self.command_timeout_s)
             except TimeoutError:
@@ -217,13 +215,20 @@ class ControllerService:
                 self._reply = None
             return CommandResult(reply.ok, {"command": reply.command}, reply.error)
 
-    def _execute_now(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult:
+    def _apply(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult | None:
+        """Apply a command and take the sequence's actions: its result, or None when the
+        sequence answers later (deferred: ``_reply`` is then the future it resolves)."""
         try:
             outcome = self.controller.handle(command, self.now, xy_mm)
         except CommandError as exc:
             return CommandResult(False, error=str(exc))
+        point = outcome.resume_point
+        if point is not None:
+            self._publish_event(ResumePointMarked(self.now, point.line, point.index))
+        if outcome.deferred:
+            self._reply = self._loop.create_future()
         self.pump()
-        return CommandResult(True, outcome.data)
+        return None if outcome.deferred else CommandResult(True, outcome.data)
 
     def _note_feed(self, motion: str) -> None:
         feed_mm_min = cutting_feed_mm_min(motion)
@@ -262,13 +267,14 @@ class ControllerService:
         while True:
             action = await self._work.get()
             try:
-                await self.perform(action)
+                await self._perform(action)
             except (TimeoutError, LinkError) as exc:
                 self.sequence.on_action_failed(action, str(exc))
             self.pump()
 
-    async def perform(self, action: act.BoardAction) -> None:
-        """One board action as board requests (its completion comes back as an event)."""
+    async def _perform(self, action: act.BoardAction) -> None:
+        """One board action as board requests (its completion comes back as an event); a
+        Z velocity never comes here (``pump`` sends it at once)."""
         client = self.client
         if isinstance(action, act.SwitchTorch):
             await client.torch(action.on)
@@ -289,8 +295,6 @@ class ControllerService:
             await client.set_current(action.current_a)
         elif isinstance(action, act.ResetFaults):
             await client.fault_reset()
-        elif isinstance(action, act.SetZVelocity):
-            self._send_velocity(action.velocity_mm_s)
 
     def _spawn(self, work: Any) -> None:
         task = asyncio.create_task(work, name="board-completion")
@@ -325,10 +329,10 @@ class ControllerService:
     def _on_board(self, item: Telemetry, t_s: float) -> None:
         sequence = self.sequence
         if isinstance(item, fp.Samples):
-            t_last, z_mm, xy = feed_samples(sequence, item, t_s, self._requested_feed_mm_s)
+            z_mm, xy = feed_samples(sequence, item, t_s, self._requested_feed_mm_s)
             # Only what the batch brought is kept here; telemetry() builds the point at the
             # MQTT rate, not at the sample rate.
-            self._last_batch = (t_last, z_mm, xy)
+            self._last_batch = (t_s, z_mm, xy)
         elif isinstance(item, fp.Event):
             sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
         elif isinstance(item, fp.Fault):
@@ -343,7 +347,6 @@ class ControllerService:
 
         The sequence may be the part that failed, so what keeps the table safe does not rely
         on it: the torch-off request and a zero Z velocity go out first, directly."""
-        self.handler_errors += 1
         self._send_velocity(0.0)
         # One torch-off in flight and one per TORCH_OFF_REPEAT_S at most: a bug that fires on
         # every batch must not fill the board's request window.
@@ -408,20 +411,16 @@ class ControllerService:
 
 
 def feed_samples(
-    sequence: CutSequence, batch: fp.Samples, t0_s: float, requested_feed_mm_s: float | None
-) -> tuple[float, float, float | None]:
-    """One SAMPLES batch into the cut sequence, in its units and on board time.
-
-    ``t0_s`` is the board time of the batch's first sample; the batch is handled at the
-    time of its last. Returns (that time, Z mm, XY speed mm/s or None)."""
-    period_s = batch.period_us / 1e6
-    t_last = t0_s + period_s * (len(batch.samples_cv) - 1)
+    sequence: CutSequence, batch: fp.Samples, t_s: float, requested_feed_mm_s: float | None
+) -> tuple[float, float | None]:
+    """One SAMPLES batch into the cut sequence, in its units, at ``t_s``: the board time
+    of its last sample (the link's stamp). Returns (Z mm, XY speed mm/s or None)."""
     z_mm = batch.z_um / 1000
-    sequence.on_inputs(batch.inputs, z_mm, t_last)
+    sequence.on_inputs(batch.inputs, z_mm, t_s)
     xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else None
     volts = [cv / 100 for cv in batch.samples_cv]
-    sequence.on_samples(volts, period_s, z_mm, xy, requested_feed_mm_s, t_last)
-    return t_last, z_mm, xy
+    sequence.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, t_s)
+    return z_mm, xy
 
 
 def _fault_names(faults: int) -> str:

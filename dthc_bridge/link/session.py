@@ -36,7 +36,7 @@ __all__ = ["BoardSession", "ReportCallback", "SamplesCallback"]
 
 log = structlog.get_logger("dthc_bridge.link")
 
-SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of sample 0
+SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of its last sample
 # EVENT, FAULT, MOTION_DONE or PROBE_RESULT, and its 64-bit board time
 ReportCallback = Callable[[fp.Report, int], None]
 
@@ -83,7 +83,7 @@ class BoardSession:
         self._last_tx_s = 0.0
         self._consecutive_timeouts = 0
         self._last_sample_seq: int | None = None
-        self._last_sample_t0_us: int | None = None
+        self._last_sample_t_us: int | None = None
         self._clock_known = False  # the handshake's CLOCK reply anchors the 32-bit stamps
         self._last_event_counter: int | None = None
         self.lost: asyncio.Future[LinkError] = self._loop.create_future()
@@ -297,17 +297,17 @@ class BoardSession:
             if gap < 0x8000:
                 stats.telemetry_gaps += gap
         self._last_sample_seq = batch.stream_seq
-        t0_us = self.clock.extend(batch.t0_us)
-        last_t0 = self._last_sample_t0_us
-        if last_t0 is not None and t0_us <= last_t0 and self.boot_id is not None:
+        t_us = self.clock.extend(batch.t_last_us)
+        last_t = self._last_sample_t_us
+        if last_t is not None and t_us <= last_t and self.boot_id is not None:
             # A board's samples only move forward: time going back is a reboot that no
             # reply has shown yet (while cutting, the Z velocity stream is unacknowledged).
             self.stats.reboots += 1
             self.fail(BoardRebooted(self.boot_id, None))
             return
-        self._last_sample_t0_us = t0_us
+        self._last_sample_t_us = t_us
         if self.on_samples is not None:
-            self.on_samples(batch, t0_us)
+            self.on_samples(batch, t_us)
 
     def _check_boot_id(self, boot_id: int) -> bool:
         if self.boot_id is not None and boot_id != self.boot_id:

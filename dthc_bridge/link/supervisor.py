@@ -64,7 +64,9 @@ class LinkStateChange:
     board_rebooted: bool = False  # the session ended because the board restarted
 
 
-SamplesListener = Callable[[fp.Samples, float], None]  # batch, board time of sample 0 (s)
+# A batch and its board time (s): the time of its last sample, when the batch is handled
+# (so a command arriving next takes effect then, not (n - 1) periods earlier).
+SamplesListener = Callable[[fp.Samples, float], None]
 ReportListener = Callable[[fp.Report, float], None]  # report, board time it happened (s)
 StateListener = Callable[[LinkStateChange], None]
 ErrorListener = Callable[[Exception], None]  # a listener raised while handling board data
@@ -155,12 +157,8 @@ class LinkSupervisor:
                 not_logged_since_last=unlogged,
             )
 
-    def _on_samples(self, batch: fp.Samples, t0_board_us: int) -> None:
-        t0_s = self.timeline.seconds(t0_board_us)
-        # The batch is handled at its last sample's time: a command arriving next takes
-        # effect then, not (n - 1) periods earlier.
-        self.timeline.seconds(t0_board_us + batch.period_us * (len(batch.samples_cv) - 1))
-        self._notify(self._samples_listeners, batch, t0_s)
+    def _on_samples(self, batch: fp.Samples, board_us: int) -> None:
+        self._notify(self._samples_listeners, batch, self.timeline.seconds(board_us))
 
     def _on_report(self, report: fp.Report, board_us: int) -> None:
         self._notify(self._report_listeners, report, self.timeline.seconds(board_us))
