@@ -12,7 +12,7 @@ from dthc_bridge.board import Telemetry
 from dthc_bridge.config import DaemonConfig
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.daemon import build_service
-from dthc_bridge.events import BoardRestarted
+from dthc_bridge.events import ArcLost, BoardRestarted, ProgramPaused
 from dthc_bridge.service import ControllerService
 from dthc_tools.bench.control import BenchLoop, make_thc
 from dthc_tools.bench.reference import ReferenceConfig
@@ -146,4 +146,15 @@ def test_a_command_takes_effect_at_the_newest_sample() -> None:
     loop = ClosedLoop("flat_clean", seed=6)
     loop.step()
     assert loop.service.now == pytest.approx(loop.board.t_s, abs=1e-9)
+    loop.close()
+
+
+def test_an_arc_lost_mid_cut_is_published_as_arc_lost() -> None:
+    """The arc goes out mid-cut: the service publishes ArcLost (MQTT type ``arc_lost``),
+    not a plain pause, and no other pause for the same fault."""
+    loop = _cutting("arc_lost_midcut", seed=1)
+    assert not loop.move("G1 X450 Y50 F5500", max_s=10)
+    pauses = [e for e in loop.events if isinstance(e, ArcLost | ProgramPaused)]
+    assert [type(e) for e in pauses] == [ArcLost]
+    assert pauses[0].as_payload()["type"] == "arc_lost"
     loop.close()
