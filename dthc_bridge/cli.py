@@ -20,6 +20,7 @@ from .deploy.install import (
     run_uninstall,
 )
 from .logs import configure_logging
+from .program import check as check_program
 
 __all__ = ["TOOL_COMMANDS", "main", "missing_for_extra", "run_tool"]
 
@@ -36,6 +37,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--config", type=Path, help="TOML configuration file")
     check = sub.add_parser("check-config", help="validate a configuration file")
     check.add_argument("file", type=Path)
+    check_program.add_arguments(
+        sub.add_parser(
+            "check-program", help="preflight a G-code program: cuts, parameters, refused lines"
+        )
+    )
     conf = sub.add_parser(
         "conformance", help="check that a board honours the protocol and its safety rules"
     )
@@ -173,6 +179,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.log_level or "warning")
     if args.command == "check-config":
         return _check(args.file)
+    if args.command == "check-program":
+        return check_program.run_from_args(args)
     if args.command == "install-service":
         return run_install(args)
     if args.command == "uninstall-service":

@@ -88,6 +88,12 @@ class ThcSettings(_Closed):
         return ThcConfig(**self.model_dump())
 
 
+_NOT_SEQUENCE = frozenset(
+    {"dialect", "plasma_mode_at_start", "materials_file", "materials_in_inches",
+     "default_cut_feed_mm_min"}
+)  # fmt: skip
+
+
 class ControllerSettings(_Closed):
     # CutSequence.__init__ starts in this mode (ARC_OK_AND_VOLTAGE), not a SequenceConfig
     # field, so it cannot be read from one; tests/daemon/test_defaults.py holds them equal.
@@ -111,9 +117,19 @@ class ControllerSettings(_Closed):
     ihs_skip_type: int = Field(_SEQ.ihs_skip_type, ge=0, le=1)
     dry_run: bool = _SEQ.dry_run
     thc: ThcSettings = ThcSettings()
+    # The dialect of G-code lines whose request names none (dthc_bridge.controller.dialect).
+    dialect: Literal["masso", "plasmac", "rosetta", "relay"] = "masso"
+    # Start in plasma mode, for posts that never send T112 M6 (MASSO's Fusion 360 post).
+    plasma_mode_at_start: bool = False
+    # The material library (QtPlasmaC format), written crash-safe on every change; None:
+    # no library (material 0, the default, only; material_set is refused).
+    materials_file: Path | None = None
+    materials_in_inches: bool = False  # the library's lengths and feeds are inches
+    # Material 0 (the default): the default cut parameters with this cut feed.
+    default_cut_feed_mm_min: float = Field(3000.0, gt=0.0, le=50_000.0)
 
     def sequence(self) -> SequenceConfig:
-        fields = self.model_dump(exclude={"mode", "thc"})
+        fields = self.model_dump(exclude={"mode", "thc", *_NOT_SEQUENCE})
         return SequenceConfig(**fields)
 
     @property

@@ -20,11 +20,13 @@ import firmware_protocol as fp
 
 from .board import BoardClient
 from .config import ControllerConfigs, DaemonConfig
-from .controller.plasma import PlasmaController
+from .controller.dialect import Dialect
+from .controller.plasma import PlasmaController, default_material
 from .controller.sequence import CutSequence
 from .controller.thc import ThcController
 from .deploy.sdnotify import SdNotifier
 from .link import LinkSupervisor
+from .materials import MaterialStore
 from .mqtt.gateway import MqttGateway
 from .service import ControllerService
 
@@ -58,10 +60,18 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
             cal_scale=board.cal_scale,
         )
 
+    settings = config.controller
+    controller = build_controller(settings.configs())
+    controller.sequence.plasma_mode = settings.plasma_mode_at_start
+    controller.default_material = default_material(settings.default_cut_feed_mm_min)
+    controller.inch_materials = settings.materials_in_inches
+    store = None if settings.materials_file is None else MaterialStore(settings.materials_file)
+    controller.set_library(store.load() if store is not None else {})
     service = ControllerService(
-        build_controller(config.controller.configs()), supervisor, client, board_setup=setup,
+        controller, supervisor, client, board_setup=setup,
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
+        dialect=Dialect(settings.dialect), materials=store,
     )  # fmt: skip
     return supervisor, service
 

@@ -47,6 +47,9 @@ class ProgramPaused(ControllerEvent):
 
     type: ClassVar[str] = "pause"
     reason: str
+    # "fault", or "stop_after_pierce" (G200 S1): the M3 is still pending, cycle start
+    # answers it, so a sender waits instead of stopping the program.
+    cause: str = "fault"
 
 
 @dataclass(frozen=True, slots=True)

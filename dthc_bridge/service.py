@@ -27,6 +27,7 @@ import firmware_protocol as fp
 from .board import BoardClient, Telemetry
 from .controller import actions as act
 from .controller.commands import Command, CommandError, CycleStart
+from .controller.dialect import Dialect
 from .controller.gcode import parse_line, parse_request
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence, with_board_limits
@@ -41,6 +42,13 @@ from .events import (
     ResumePointMarked,
 )
 from .link import LinkError, LinkState, LinkStateChange, LinkSupervisor
+from .materials import (
+    TEMPORARY_BASE,
+    MaterialError,
+    MaterialStore,
+    material_from_dict,
+    material_to_dict,
+)
 from .mqtt.port import CommandResult
 
 __all__ = ["ControllerService", "EventListener", "feed_samples"]
@@ -51,6 +59,8 @@ EVENT_QUEUE_SIZE = 256
 TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers keep failing
 
 EventListener = Callable[[ControllerEvent], None]
+MATERIAL_REQUESTS = frozenset({"materials", "material_get", "material_set", "material_delete"})
+_ENVELOPE = ("transaction", "deadline_ms")
 
 
 class ControllerService:
@@ -62,8 +72,12 @@ class ControllerService:
         *,
         command_timeout_s: float = 60.0,
         board_setup: Callable[[BoardClient], Awaitable[None]] | None = None,
+        dialect: Dialect = Dialect.MASSO,
+        materials: MaterialStore | None = None,
     ) -> None:
         self.controller = controller
+        self.dialect = dialect  # of lines whose request names none
+        self.material_store = materials
         self.sequence = controller.sequence
         self.supervisor = supervisor
         self.client = client
@@ -92,10 +106,15 @@ class ControllerService:
     # --- the ControllerPort seam -----------------------------------------------------------
 
     async def execute_gcode(
-        self, line: str, *, line_number: int | None = None, xy_mm: tuple[float, float] | None = None
+        self,
+        line: str,
+        *,
+        line_number: int | None = None,
+        xy_mm: tuple[float, float] | None = None,
+        dialect: Dialect | None = None,
     ) -> CommandResult:
         try:
-            parsed = parse_line(line, line_number=line_number)
+            parsed = parse_line(line, line_number=line_number, dialect=dialect or self.dialect)
         except CommandError as exc:
             return CommandResult(False, error=str(exc))
         if parsed.motion:
@@ -111,6 +130,13 @@ class ControllerService:
     async def execute_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
         if name == "status":
             return CommandResult(True, self.snapshot())
+        if name in MATERIAL_REQUESTS:
+            return self._material_request(name, args)
+        if name == "program_start":
+            if self.sequence.busy:
+                return CommandResult(False, error=f"program_start: a cut is running "
+                                     f"({self.sequence.state})")  # fmt: skip
+            return CommandResult(True, self.controller.begin_program())
         try:
             command = parse_request(name, args)
         except CommandError as exc:
@@ -122,6 +148,52 @@ class ControllerService:
             log.warning("sender_lost_mid_cut", reason=reason)
             self.sequence.abort(f"sender lost: {reason}")
             self.pump()
+
+    def materials(self) -> dict[str, object]:
+        """The library as the retained ``materials`` topic shows it (temporaries included:
+        they are what a running program cuts with)."""
+        table = self.controller.materials
+        return {
+            "selected": table.selected_number,
+            "materials": [
+                {"number": m.number, **material_to_dict(m)}
+                for m in (self.controller.default_material, *table.materials.values())
+            ],
+        }
+
+    def _material_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
+        """``materials``, ``material_get``/``_set``/``_delete`` {number, ...}: the library,
+        written to its file (crash-safe) before the answer."""
+        if name == "materials":
+            return CommandResult(True, self.materials())
+        raw = args.get("number")
+        if isinstance(raw, bool) or not isinstance(raw, int):
+            return CommandResult(False, error=f"{name} number: {raw!r} is not a material number")
+        try:
+            if name == "material_get":
+                material = self.controller.materials.get(raw, where=f"{name} number")
+                return CommandResult(True, {"number": raw, **material_to_dict(material)})
+            store = self.material_store
+            if store is None:
+                return CommandResult(False, error=f"{name}: no materials_file is configured")
+            if raw == 0 or raw >= TEMPORARY_BASE:
+                return CommandResult(
+                    False, error=f"{name} number: {raw} is not a library material (1..999999)"
+                )
+            fields = {k: v for k, v in args.items() if k not in ("number", *_ENVELOPE)}
+            if name == "material_set":
+                store.set(material_from_dict(raw, fields))
+            else:
+                if fields:
+                    return CommandResult(False, error=f"{name} {next(iter(fields))}: "
+                                         "unknown argument")  # fmt: skip
+                store.delete(raw)
+        except MaterialError as exc:
+            return CommandResult(False, error=str(exc))
+        except OSError as exc:
+            return CommandResult(False, error=f"{name}: cannot write the materials file: {exc}")
+        self.controller.set_library(store.all())
+        return CommandResult(True, {"number": raw})
 
     def snapshot(self) -> dict[str, object]:
         state = self.sequence.snapshot()
@@ -222,6 +294,12 @@ class ControllerService:
             outcome = self.controller.handle(command, self.now, xy_mm)
         except CommandError as exc:
             return CommandResult(False, error=str(exc))
+        if outcome.store is not None and self.material_store is not None:
+            try:
+                self.material_store.set(outcome.store)
+            except OSError as exc:
+                log.error("material_not_stored", number=outcome.store.number, error=str(exc))
+            self.controller.set_library(self.material_store.all())
         point = outcome.resume_point
         if point is not None:
             self._publish_event(ResumePointMarked(self.now, point.line, point.index))
@@ -252,7 +330,7 @@ class ControllerService:
                 if action.cause is act.PauseCause.ARC_LOST:
                     self._publish_event(ArcLost(self.now, action.reason))
                 else:
-                    self._publish_event(ProgramPaused(self.now, action.reason))
+                    self._publish_event(ProgramPaused(self.now, action.reason, str(action.cause)))
             else:
                 self._work.put_nowait(action)
 

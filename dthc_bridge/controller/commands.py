@@ -15,17 +15,23 @@ __all__ = [
     "CommandError",
     "CutParams",
     "CycleStart",
+    "DefineMaterial",
     "LegacyMode",
     "OhmicTest",
     "OperatingMode",
     "PlasmaMode",
     "ProbeAndStart",
+    "ProbeSurface",
+    "ProgramZMove",
     "Rearm",
     "ResumePoint",
     "SelectCurrent",
+    "SelectMaterial",
     "SetCutParams",
+    "SetWorkZ",
     "ThcEnable",
     "ThcMode",
+    "TorchEnable",
     "TorchStart",
     "TorchStop",
     "VelocityReduction",
@@ -83,13 +89,15 @@ class ThcMode(IntEnum):
 
 @dataclass(frozen=True, slots=True)
 class PlasmaMode:
-    """T112 M6 enters plasma mode; any other tool leaves it."""
+    """A tool change. MASSO: T112 M6 enters plasma mode, any other tool leaves it. PlasmaC:
+    T0 is the plasma torch (``torch=True``), so selecting it never leaves plasma mode."""
 
     tool: int
+    torch: bool | None = None  # set by dialects where the torch is not tool 112
 
     @property
     def enabled(self) -> bool:
-        return self.tool == 112
+        return self.torch if self.torch is not None else self.tool == 112
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,7 +114,12 @@ class LegacyMode:
 
 @dataclass(frozen=True, slots=True)
 class TorchStart:
-    """M3: with G200 active, the automatic start sequence; answered when XY may move."""
+    """M3: with G200 active, the automatic start sequence; answered when XY may move.
+
+    ``relay``: the program does its own start sequence (relay dialect): M3 only switches the
+    torch on and is answered at arc OK. In MASSO legacy mode (bare G200) every M3 is one."""
+
+    relay: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,6 +195,60 @@ class VelocityReduction:
 
 
 @dataclass(frozen=True, slots=True)
+class TorchEnable:
+    """PlasmaC M62/M64 P3 (torch disabled: motion goes on with the torch off, the hole
+    over-cut) and M63/M65 P3 (enabled). 62/63 with the next motion, 64/65 at once."""
+
+    enabled: bool
+    synchronized: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class SelectMaterial:
+    """PlasmaC M190 P<n>: the material's cut parameters, feed and current; -1 = the
+    material in force before the program."""
+
+    number: int
+
+
+@dataclass(frozen=True, slots=True)
+class DefineMaterial:
+    """A PlasmaC magic comment ``(o=0, ph=..., ...)``: the comment's text, checked by
+    :func:`dthc_bridge.materials.parse_magic_comment` when parsed."""
+
+    comment: str
+
+
+@dataclass(frozen=True, slots=True)
+class ProgramZMove:
+    """A Z word of the program (``G0 Z20``, ``G1 Z1.5 F300``, ``G53 G0 Z-5``): Z belongs to
+    the board. In work coordinates (``G92``/``G10 L20`` origin) unless ``machine``."""
+
+    z_mm: float
+    feed_mm_min: float | None = None  # None: rapid
+    machine: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class ProbeSurface:
+    """A probe the program does itself (``G38.2 Z-50 F300``, Mach3 ``G31``): the board probes
+    down with the touch-off sensors and stops on contact. ``z_mm`` is the work Z to probe to
+    at most; ``require_contact`` is G38.2 (no contact is an error) against G38.3."""
+
+    z_mm: float
+    feed_mm_min: float
+    require_contact: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class SetWorkZ:
+    """``G92 Z<v>`` / ``G10 L20 P1 Z<v>``: the current Z now reads ``z_mm`` in work
+    coordinates; ``G92.1`` (``z_mm=None``) clears the origin."""
+
+    z_mm: float | None
+
+
+@dataclass(frozen=True, slots=True)
 class CycleStart:
     """The operator's cycle start (resumes an S1 stop after pierce)."""
 
@@ -213,4 +280,10 @@ Command = (
     | CycleStart
     | Rearm
     | OhmicTest
+    | TorchEnable
+    | SelectMaterial
+    | DefineMaterial
+    | ProgramZMove
+    | ProbeSurface
+    | SetWorkZ
 )

@@ -68,17 +68,23 @@ from .commands import (
     CommandError,
     CutParams,
     CycleStart,
+    DefineMaterial,
     LegacyMode,
     OhmicTest,
     OperatingMode,
     PlasmaMode,
     ProbeAndStart,
+    ProbeSurface,
+    ProgramZMove,
     Rearm,
     ResumePoint,
     SelectCurrent,
+    SelectMaterial,
     SetCutParams,
+    SetWorkZ,
     ThcEnable,
     ThcMode,
+    TorchEnable,
     TorchStart,
     TorchStop,
     VelocityReduction,
@@ -86,6 +92,7 @@ from .commands import (
     VoltageMode,
     check_range,
 )
+from .dialect import Dialect
 from .words import GcodeSyntaxError, Tokens, Word, tokenize
 
 __all__ = [
@@ -116,6 +123,12 @@ class ParsedLine:
     motion: str | None = None
     line_number: int | None = None
     comment: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class _Context:
+    line: int | None  # the resume line (G100 P0)
+    dialect: Dialect
 
 
 # --------------------------------------------------------------------------- tokens
@@ -203,7 +216,7 @@ def _single(command: str, letter: str, words: Sequence[Word]) -> tuple[Word | No
 # --------------------------------------------------------------------------- MASSO
 
 
-def _g200(words: Sequence[Word], _line: int | None) -> Command:
+def _g200(words: Sequence[Word], _ctx: _Context) -> Command:
     p = _Params("G200", words, "FPDCVAOS")
     if not p.values:
         return LegacyMode()
@@ -230,31 +243,64 @@ def _g200(words: Sequence[Word], _line: int | None) -> Command:
     )
 
 
-def _m3(words: Sequence[Word], _line: int | None) -> Command:
-    _Params("M3", words, "")
-    return TorchStart()
+_TOOLS_NOT_HERE = {1: "the scribe", 2: "the spotting torch"}
 
 
-def _m5(words: Sequence[Word], _line: int | None) -> Command:
-    _Params("M5", words, "")
+def _plasmac_tool(command: str, p: _Params, *, stop: bool) -> None:
+    """PlasmaC's ``$`` word: $0 the torch, $1 scribe, $2 spotting; M5 $-1 stops them all."""
+    if "$" not in p.values:
+        return
+    tool = _whole(p.name("$"), p.values["$"])
+    if tool == 0 or (stop and tool == -1):
+        return
+    name = f"{command} ${tool}"
+    if tool in _TOOLS_NOT_HERE:
+        raise CommandError(name, f"{_TOOLS_NOT_HERE[tool]} is not on this board (only $0)")
+    raise CommandError(name, "not a PlasmaC tool ($0 torch" + (", $-1 all" if stop else "") + ")")
+
+
+def _m3(words: Sequence[Word], ctx: _Context) -> Command:
+    # S is a spindle speed (PlasmaC M3 $0 S1, grbl M03 S1000): it means nothing to a torch.
+    p = _Params("M3", words, "$S")
+    _plasmac_tool("M3", p, stop=False)
+    return TorchStart(relay=ctx.dialect is Dialect.RELAY)
+
+
+def _m5(words: Sequence[Word], _ctx: _Context) -> Command:
+    p = _Params("M5", words, "$S")
+    _plasmac_tool("M5", p, stop=True)
     return TorchStop()
 
 
-def _m666(words: Sequence[Word], _line: int | None) -> Command:
+def _m190(words: Sequence[Word], _ctx: _Context) -> Command:
+    p = _Params("M190", words, "P")
+    number = _whole(p.name("P"), p.require("P"))
+    if number < -1:
+        raise CommandError(p.name("P"), f"{number} is not a material number (-1 = the previous)")
+    return SelectMaterial(number)
+
+
+def _m666(words: Sequence[Word], _ctx: _Context) -> Command:
     _Params("M666", words, "")
     return ThcEnable(False)
 
 
-def _m667(words: Sequence[Word], _line: int | None) -> Command:
+def _m667(words: Sequence[Word], _ctx: _Context) -> Command:
     p = _Params("M667", words, "F")
     return ThcEnable(True, z_feed_mm_min=p.positive("F") if "F" in p.values else None)
 
 
-def _m6(words: Sequence[Word], _line: int | None) -> Command:
+def _m6(words: Sequence[Word], ctx: _Context) -> Command:
     p = _Params("M6", words, "T")
     tool = _whole(p.name("T"), p.require("T"))
     if tool < 0:
         raise CommandError(p.name("T"), f"{tool} is not a tool number")
+    if ctx.dialect is Dialect.PLASMAC:
+        if tool in _TOOLS_NOT_HERE:
+            raise CommandError(
+                f"T{tool} M6", f"tool {tool} is {_TOOLS_NOT_HERE[tool]}: not on this board"
+            )
+        return PlasmaMode(tool, torch=tool == 0)
     return PlasmaMode(tool)
 
 
@@ -269,7 +315,7 @@ _G100_NOT_PLASMA = {
 }
 
 
-def _g100(words: Sequence[Word], line: int | None) -> Command:
+def _g100(words: Sequence[Word], ctx: _Context) -> Command:
     p_word, rest = _single("G100", "P", words)
     if p_word is None:
         raise CommandError("G100 P", "required parameter is missing (selects the function)")
@@ -279,7 +325,7 @@ def _g100(words: Sequence[Word], line: int | None) -> Command:
         raise CommandError(command, f"not a plasma function: {_G100_NOT_PLASMA[function]}")
     if function == 0:
         _Params(command, rest, "")
-        return ResumePoint(line)
+        return ResumePoint(ctx.line)
     if function == 4:
         p = _Params(command, rest, "A")
         return SelectCurrent(check_range(p.name("A"), p.positive("A"), 0.0, 400.0))
@@ -308,31 +354,36 @@ def _g100(words: Sequence[Word], line: int | None) -> Command:
 
 # --------------------------------------------------------------------------- LinuxCNC PlasmaC
 
-_PLASMAC_OUTPUTS = {1: "arc-OK ignore", 3: "torch disable for over-cut"}
+_PLASMAC_OUTPUTS = {0: "a digital output", 1: "arc-OK ignore"}
 
 
-def _thc_output(code: int) -> Callable[[Sequence[Word], int | None], Command]:
-    """M62/M64 P2 (THC off) and M63/M65 P2 (THC on); 62/63 wait for the next motion."""
+def _thc_output(code: int) -> Callable[[Sequence[Word], _Context], Command]:
+    """M62/M64 P2 (THC off) and M63/M65 P2 (THC on), P3 torch disable/enable (hole
+    over-cut); 62/63 wait for the next motion, 64/65 act at once."""
     command = f"M{code}"
 
-    def parse(words: Sequence[Word], _line: int | None) -> Command:
+    def parse(words: Sequence[Word], _ctx: _Context) -> Command:
         p = _Params(command, words, "P")
         output = _whole(p.name("P"), p.require("P"))
-        if output != 2:
-            what = _PLASMAC_OUTPUTS.get(output, "digital output")
-            raise CommandError(
-                f"{command} P{output}", f"not a plasma function of ours ({what}); only P2 (THC)"
-            )
-        return ThcEnable(enabled=code in (63, 65), synchronized=code in (62, 63))
+        enabled, synchronized = code in (63, 65), code in (62, 63)
+        if output == 2:
+            return ThcEnable(enabled=enabled, synchronized=synchronized)
+        if output == 3:
+            return TorchEnable(enabled=enabled, synchronized=synchronized)
+        what = _PLASMAC_OUTPUTS.get(output, "a digital output")
+        raise CommandError(
+            f"{command} P{output}",
+            f"{what} is not a plasma function of ours: only P2 (THC) and P3 (torch)",
+        )
 
     return parse
 
 
-def _velocity_reduction(code: int) -> Callable[[Sequence[Word], int | None], Command]:
+def _velocity_reduction(code: int) -> Callable[[Sequence[Word], _Context], Command]:
     """M67 (with the next motion) / M68 (at once) E3 Q<percent>."""
     command = f"M{code}"
 
-    def parse(words: Sequence[Word], _line: int | None) -> Command:
+    def parse(words: Sequence[Word], _ctx: _Context) -> Command:
         p = _Params(command, words, "EQ")
         channel = _whole(p.name("E"), p.require("E"))
         if channel != 3:
@@ -345,11 +396,90 @@ def _velocity_reduction(code: int) -> Callable[[Sequence[Word], int | None], Com
     return parse
 
 
+# --------------------------------------------------------------------------- Z: the board's
+
+
+def _probe(code: str, require_contact: bool) -> Callable[[Sequence[Word], _Context], Command]:
+    """G38.2/G38.3 (LinuxCNC, grbl) and G31 (Mach3) along Z: the board probes and stops."""
+
+    def parse(words: Sequence[Word], _ctx: _Context) -> Command:
+        p = _Params(code, words, "ZF")
+        return ProbeSurface(p.require("Z"), p.positive("F"), require_contact)
+
+    return parse
+
+
+def _probe_away(code: str) -> Callable[[Sequence[Word], _Context], Command]:
+    def parse(_words: Sequence[Word], _ctx: _Context) -> Command:
+        raise CommandError(code, "probing away from the work is not supported: the board "
+                           "probes towards it (use G38.2/G38.3)")  # fmt: skip
+
+    return parse
+
+
+_MOTION_G = {0.0: "G0", 1.0: "G1"}
+_NO_Z_G = {2.0: "G2", 3.0: "G3", 28.0: "G28", 30.0: "G30"}
+_ORIGIN_G = {92.0: "G92", 10.0: "G10"}
+
+
+def _z_commands(words: list[Word], heads: Sequence[Word]) -> tuple[list[Command], list[Word]]:
+    """The Z word of a motion line as the board's command (docs: Z belongs to the board).
+
+    Returns the commands and the words left for motion. ``G0``/``G1 Z`` is a Z move (G1
+    needs its F on the line: the daemon does not track the modal feed), ``G53`` makes it a
+    machine Z; ``G92 Z``/``G10 L20 Z`` set the work Z origin (``G92.1`` clears it)."""
+    values = {_value("G", h): h for h in heads if h.letter == "G"}
+    if 92.1 in values:
+        return [SetWorkZ(None)], [w for w in words if w is not values[92.1]]
+    z_words = [w for w in words if w.letter == "Z"]
+    if not z_words:
+        return [], words
+    if len(z_words) > 1:
+        raise CommandError("Z", "given twice")
+    z = _value("Z", z_words[0])
+    rest = [w for w in words if w is not z_words[0]]
+    for code in _ORIGIN_G:
+        if code in values:
+            if code == 10.0:
+                l_word = next((w for w in words if w.letter == "L"), None)
+                if l_word is None or _value("G10 L", l_word) != 20.0:
+                    raise CommandError("G10 Z", "only G10 L20 sets the Z origin")
+            # G92 X0 Y0 Z0: the Z origin is the board's, the XY one stays with motion.
+            left = rest if any(w.letter in "XYABC" for w in rest) else []
+            return [SetWorkZ(z)], left
+    for code, name in _NO_Z_G.items():
+        if code in values:
+            raise CommandError(f"{name} Z", "Z belongs to the board: move Z on its own line")
+    motion = [values[c] for c in _MOTION_G if c in values]
+    if not motion:
+        raise CommandError(f"Z{z_words[0].number}", "no G0 or G1 on the line (the daemon "
+                           "does not track the modal motion mode)")  # fmt: skip
+    feed: float | None = None
+    if _value("G", motion[-1]) == 1.0:
+        f_word = next((w for w in words if w.letter == "F"), None)
+        if f_word is None:
+            raise CommandError("G1 Z", "F is required on the line")
+        feed = _value("F", f_word)
+        if feed <= 0:
+            raise CommandError("G1 F", f"{feed:g} must be greater than 0")
+    command = ProgramZMove(z, feed, machine=53.0 in values)
+    if not any(w.letter in "XYABCIJ" for w in rest):
+        # Z alone: the move heads go; modal words (G90, the F) stay with motion.
+        moves = {id(h) for h in motion} | ({id(values[53.0])} if 53.0 in values else set())
+        rest = [w for w in rest if id(w) not in moves]
+    return [command], rest
+
+
 # --------------------------------------------------------------------------- lines
 
-_Handler = Callable[[Sequence[Word], int | None], Command]
+_Handler = Callable[[Sequence[Word], _Context], Command]
 
 _PLASMA_G: dict[float, tuple[str, _Handler]] = {
+    31.0: ("G31", _probe("G31", True)),
+    38.2: ("G38.2", _probe("G38.2", True)),
+    38.3: ("G38.3", _probe("G38.3", False)),
+    38.4: ("G38.4", _probe_away("G38.4")),
+    38.5: ("G38.5", _probe_away("G38.5")),
     100.0: ("G100", _g100),
     200.0: ("G200", _g200),
 }
@@ -363,6 +493,7 @@ _PLASMA_M: dict[float, tuple[str, _Handler]] = {
     65.0: ("M65", _thc_output(65)),
     67.0: ("M67", _velocity_reduction(67)),
     68.0: ("M68", _velocity_reduction(68)),
+    190.0: ("M190", _m190),
     666.0: ("M666", _m666),
     667.0: ("M667", _m667),
 }
@@ -395,11 +526,14 @@ def _motion_text(line: str, words: Sequence[Word]) -> str | None:
     return " ".join(runs) or None
 
 
-def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
+def parse_line(
+    line: str, *, line_number: int | None = None, dialect: Dialect = Dialect.MASSO
+) -> ParsedLine:
     """Split one G-code line into plasma commands, motion text, line number and comment.
 
     ``line_number`` is the caller's position of the line (used when the line has no N word,
-    and for ``G100 P0`` resume points). Raises :class:`CommandError` naming the word.
+    and for ``G100 P0`` resume points); ``dialect`` decides the few forms dialects disagree
+    on (:mod:`.dialect`). Raises :class:`CommandError` naming the word.
     """
     tokens = _lex(line)
     comments = tokens.comments
@@ -440,7 +574,9 @@ def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
 
     commands: list[Command] = []
     motion: list[Word] = []
-    resume_line = line_number if line_number is not None else n_word
+    ctx = _Context(line_number if line_number is not None else n_word, dialect)
+    if dialect is Dialect.PLASMAC:
+        commands.extend(DefineMaterial(c) for c in comments if c.startswith("o="))
     for group in groups:
         if group.handler is None:
             for word in group.params:
@@ -456,8 +592,15 @@ def parse_line(line: str, *, line_number: int | None = None) -> ParsedLine:
                 and group.head.index in tool_changes
             ):
                 params = [tool_word, *params]
-            commands.append(group.handler(params, resume_line))
+            if group.head is not None and group.head.index in tool_changes:
+                # M06 T1 F5840 (posts write the feed there): the F is the machine's.
+                motion.extend(w for w in params if w.letter == "F")
+                params = [w for w in params if w.letter != "F"]
+            commands.append(group.handler(params, ctx))
     motion.sort(key=lambda w: w.index)
+    heads_left = [w for w in motion if w.letter in "GM"]
+    z_commands, motion = _z_commands(motion, heads_left)
+    commands.extend(z_commands)
 
     return ParsedLine(
         commands=tuple(commands),

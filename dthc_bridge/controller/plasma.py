@@ -8,23 +8,33 @@ is refused with a :class:`CommandError` that changes nothing.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from ..materials import Material, MaterialError, MaterialTable, material_to_dict
+from ..materials import parse_magic_comment as _parse_magic
 from .commands import (
     Command,
     CommandError,
+    CutParams,
     CycleStart,
+    DefineMaterial,
     LegacyMode,
     OhmicTest,
     OperatingMode,
     PlasmaMode,
     ProbeAndStart,
+    ProbeSurface,
+    ProgramZMove,
     Rearm,
     ResumePoint,
     SelectCurrent,
+    SelectMaterial,
     SetCutParams,
+    SetWorkZ,
     ThcEnable,
+    TorchEnable,
     TorchStart,
     TorchStop,
     VelocityReduction,
@@ -47,12 +57,94 @@ class Outcome:
     deferred: bool = False  # the sequence answers later with a CommandReply
     data: dict[str, Any] = field(default_factory=dict)
     resume_point: ResumeTrack | None = None  # a G100 P0 just marked one
+    store: Material | None = None  # a magic comment (o=1, o=2) changed the library
+
+
+def default_material(feed_mm_min: float) -> Material:
+    """Material 0, the default material: the daemon's default cut parameters (the values
+    of a bare ``G200`` line) and its default cut feed. QtPlasmaC keeps it in its settings,
+    not in the material file, and so does the daemon."""
+    p = CutParams()
+    return Material(
+        number=0,
+        name="default",
+        pierce_height=p.pierce_height_mm,
+        pierce_delay_s=p.pierce_delay_ms / 1000.0,
+        cut_height=p.cut_height_mm,
+        cut_speed=feed_mm_min,
+        cut_volts=p.cut_voltage_v or 0.0,
+    )
 
 
 class PlasmaController:
-    def __init__(self, sequence: CutSequence | None = None) -> None:
+    def __init__(
+        self,
+        sequence: CutSequence | None = None,
+        *,
+        materials: Mapping[int, Material] | None = None,
+        default: Material | None = None,
+        inch_materials: bool = False,
+    ) -> None:
         self.sequence = sequence or CutSequence()
         self.resume_points: list[ResumeTrack] = []
+        self.default_material = default or default_material(3000.0)
+        self.inch_materials = inch_materials  # the library's lengths are inches
+        self.materials = MaterialTable(materials or {}, self.default_material)
+
+    # --- materials -------------------------------------------------------------------------
+
+    def set_library(self, materials: Mapping[int, Material]) -> None:
+        """The library changed (MQTT, a magic comment): same selection where it still is."""
+        table = self.materials
+        keep = {n: m for n, m in table.materials.items() if m.temporary}
+        initial = table.initial if table.initial in materials or table.initial == 0 else 0
+        self.materials = MaterialTable({**materials, **keep}, self.default_material,
+                                       initial=initial)  # fmt: skip
+        if table.selected_number in materials or table.selected_number in keep:
+            self.materials.select(table.selected_number)
+
+    def begin_program(self) -> dict[str, Any]:
+        """A program starts: its ``M190 P-1`` returns to the material in force now, and the
+        temporary materials of an earlier program are gone (QtPlasmaC drops them on load)."""
+        table = self.materials
+        selected = table.selected_number if not table.selected.temporary else 0
+        library = {n: m for n, m in table.materials.items() if not m.temporary}
+        self.materials = MaterialTable(library, self.default_material, initial=selected)
+        self.sequence.torch_enabled = True
+        self.sequence.work_origin_mm = None
+        return {"material": selected}
+
+    def _use_material(self, material: Material, word: str) -> dict[str, Any]:
+        sequence = self.sequence
+        if sequence.busy:
+            raise CommandError(word, f"not during a cut ({sequence.state})")
+        current = sequence.params
+        try:
+            params = material.as_cut_params(
+                touch_feed_mm_min=current.touch_feed_mm_min,
+                ohmic=current.ohmic,
+                anti_dive_percent=current.anti_dive_percent,
+                inch=self.inch_materials,
+            )
+        except MaterialError as exc:
+            raise CommandError(word, str(exc)) from None
+        sequence.set_params(replace(params, stop_after_pierce=current.stop_after_pierce))
+        sequence.set_thc(material.thc)
+        sequence.config = replace(
+            sequence.config,
+            pause_at_end_s=material.pause_at_end_s,
+            # 0 in the file: no puddle jump (100 % of the pierce height, no delay).
+            puddle_height_percent=material.puddle_jump_height_percent or 100.0,
+            puddle_delay_s=material.puddle_jump_delay_s,
+        )
+        if material.cut_amps > 0:
+            sequence.request_current(material.cut_amps)
+        return {
+            "material": material.number,
+            "name": material.name,
+            "cut_feed": material.cut_speed,
+            "params": material_to_dict(material),
+        }
 
     @property
     def last_resume_point(self) -> ResumeTrack | None:
@@ -63,8 +155,10 @@ class PlasmaController:
     ) -> Outcome:
         sequence = self.sequence
         if isinstance(command, TorchStart):
-            sequence.start(now, xy_mm)
+            sequence.start(now, xy_mm, relay=command.relay)
             return Outcome(deferred=True)
+        if isinstance(command, ProgramZMove | ProbeSurface | SetWorkZ):
+            return self._program_z(command, now)
         if isinstance(command, TorchStop):
             sequence.stop(now, xy_mm)
             return Outcome(deferred=True)
@@ -82,6 +176,22 @@ class PlasmaController:
             sequence.g200_active = False
         elif isinstance(command, ThcEnable):
             sequence.set_thc(command.enabled, command.z_feed_mm_min)
+        elif isinstance(command, TorchEnable):
+            sequence.enable_torch(command.enabled)
+        elif isinstance(command, SelectMaterial):
+            word = f"M190 P{command.number}"
+            try:
+                material = self.materials.get(
+                    self.materials.initial if command.number == -1 else command.number,
+                    where=word,
+                )
+            except MaterialError as exc:
+                raise CommandError(word, exc.reason) from None
+            data = self._use_material(material, word)
+            self.materials.select(command.number)
+            return Outcome(data=data)
+        elif isinstance(command, DefineMaterial):
+            return self._define_material(command.comment)
         elif isinstance(command, VoltageAdjust):
             sequence.adjust_voltage(command.delta_v)
             return Outcome(
@@ -119,6 +229,62 @@ class PlasmaController:
                 raise CommandError("ohmic_test", "not during a cut")
             sequence.ohmic_test(now)
         return Outcome()
+
+    def _define_material(self, comment: str) -> Outcome:
+        word = f"({comment})"
+        try:
+            magic = _parse_magic(comment)
+        except MaterialError as exc:
+            raise CommandError(word, str(exc)) from None
+        if magic is None:
+            raise CommandError(word, "not a material comment (o=0, o=1 or o=2)")
+        if magic.option == 0:
+            # A temporary material is used at once: check it can be before it is defined.
+            probe = replace(magic.material, number=0)
+            self._use_material(probe, word)
+        try:
+            material = self.materials.apply(magic)
+        except MaterialError as exc:
+            raise CommandError(word, str(exc)) from None
+        if magic.option == 0:
+            data = self._use_material(material, word)
+            return Outcome(data={**data, "defined": material.number})
+        return Outcome(
+            data={"defined": material.number, "name": material.name},
+            store=material if magic.option in (1, 2) else None,
+        )
+
+    def _program_z(self, command: ProgramZMove | ProbeSurface | SetWorkZ, now: float) -> Outcome:
+        """Z words of the program: Z belongs to the board, so they come here, not to motion."""
+        sequence = self.sequence
+        word = {ProgramZMove: "Z", ProbeSurface: "G38.2", SetWorkZ: "G92 Z"}[type(command)]
+        if sequence.state is State.FAULTED:
+            raise CommandError(word, f"re-arm required after: {sequence.error}")
+        if isinstance(command, SetWorkZ):
+            if sequence.busy and not sequence.in_relay_cut:
+                raise CommandError(word, f"not during a cut ({sequence.state})")
+            try:
+                sequence.set_work_z(command.z_mm)
+            except ValueError as exc:
+                raise CommandError(word, str(exc)) from None
+            return Outcome(data={"work_zero_mm": round(sequence.work_zero_mm, 3)})
+        if isinstance(command, ProbeSurface):
+            if sequence.busy:
+                raise CommandError(word, f"not during a cut ({sequence.state})")
+            sequence.probe_surface(
+                now,
+                sequence.work_zero_mm + command.z_mm,
+                command.feed_mm_min / 60.0,
+                command.require_contact,
+            )
+            return Outcome(deferred=True)
+        target = command.z_mm if command.machine else sequence.work_zero_mm + command.z_mm
+        setup = sequence.config.setup_speed_mm_s
+        feed = setup if command.feed_mm_min is None else min(command.feed_mm_min / 60.0, setup)
+        ignored = sequence.move_z(now, target, feed)
+        if ignored is not None:
+            return Outcome(data={"ignored": ignored})
+        return Outcome(deferred=True)
 
     def _probe_and_start(
         self, p6: ProbeAndStart, now: float, xy_mm: tuple[float, float] | None

@@ -4,6 +4,10 @@
       -> PIERCE_DELAY -> [S1: S1_RAISE -> S1_WAIT -(cycle start)-> S1_LOWER -> S1_RELIGHT]
       -> [PUDDLE_JUMP] -> TO_CUT_HEIGHT -> CUTTING -M5-> PAUSE_AT_END -> TO_SAFE -> IDLE
 
+A relay cut (relay dialect, MASSO legacy mode) is only IDLE -M3-> ARC_WAIT -> CUTTING -M5->
+IDLE: the program probes (PROGRAM_PROBE), sets its Z origin and moves Z itself (Z_MOVE, or
+a move inside the relay cut), and the THC acts only while the program has it switched on.
+
 Every fault while the torch may be lit (arc lost, breakaway, float/ohmic contact after arc
 OK, Z limit, board fault, link down) ends in FAULTED: torch off, the sender told to pause,
 Z to safe height, touch-off required next time. FAULTED leaves only on an explicit re-arm
@@ -48,6 +52,8 @@ class State(StrEnum):
     TO_SAFE = "to_safe_height"
     FAULTED = "faulted"
     OHMIC_TEST = "ohmic_test"
+    Z_MOVE = "program_z_move"
+    PROGRAM_PROBE = "program_probe"
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,8 @@ class _Cut:
     auto_v_since: float | None = None
     relit: bool = False
     ohmic_failed: int = 0
+    relay: bool = False  # the program does the start sequence; M3 is the torch relay
+    z_warned: bool = False  # a program Z move was ignored during this cut (warned once)
 
 
 class CutSequence:
@@ -139,6 +147,9 @@ class CutSequence:
         self.safe_z_mm = self.config.z_max_mm - self.config.top_margin_mm
         self.warnings: list[str] = []
         self.pierce_count = 0
+        self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
+        self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
+        self._probe_requires_contact = True
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -185,6 +196,10 @@ class CutSequence:
             ),
             "locks": sorted(str(lock) for lock in self.thc.locks(self.now)),
             "probe_required": self.probe_required,
+            "torch_enabled": self.torch_enabled,
+            "work_z_mm": (
+                None if math.isnan(self._z_mm) else round(self._z_mm - self.work_zero_mm, 3)
+            ),
             "error": self.error,
             "params": {
                 "touch_feed_mm_min": p.touch_feed_mm_min, "pierce_height_mm": p.pierce_height_mm,
@@ -202,6 +217,14 @@ class CutSequence:
         self.thc.anti_dive_percent = params.anti_dive_percent
 
     def set_thc(self, enabled: bool, z_feed_mm_min: float | None = None) -> None:
+        if enabled and not self.thc_enabled and self.in_relay_cut:
+            # A relay program switches the THC on at its cut height: the target is taken
+            # afresh, once the THC delay has passed from now.
+            assert self.cut is not None
+            self.thc.reset()
+            self.cut.arc_ok_since = self.now
+            self.cut.at_speed_since = None
+            self._last_thc_t = None
         self.thc_enabled = enabled
         if z_feed_mm_min is not None:
             self.thc_z_feed_mm_min = z_feed_mm_min  # remembered until overwritten
@@ -217,8 +240,12 @@ class CutSequence:
         if self.thc.target_v is not None:
             self.thc.target_v += delta_v
 
-    def start(self, now: float, xy_mm: tuple[float, float] | None = None) -> None:
-        """M3. Answered (CommandReply) when XY motion may start, or with the error."""
+    def start(
+        self, now: float, xy_mm: tuple[float, float] | None = None, *, relay: bool = False
+    ) -> None:
+        """M3. Answered (CommandReply) when XY motion may start, or with the error.
+
+        ``relay`` (or MASSO legacy mode): no automatic sequence, the torch relay only."""
         self.now = now
         self._pending_reply = "M3"
         if self.state is State.FAULTED:
@@ -227,18 +254,21 @@ class CutSequence:
         if self.busy:
             self._reply(False, f"a cut is already running ({self.state})")
             return
-        if not self.plasma_mode:
+        if not self.plasma_mode and not relay:
             self._reply(False, "not in plasma mode: send T112 M6 first")
             return
-        if not self.g200_active:
-            self._reply(False, "legacy mode (bare G200): no automatic start sequence")
-            return
         if self._debounced & (InputMask.OHMIC | InputMask.FLOAT | InputMask.BREAKAWAY):
-            self._fault("float, ohmic or breakaway active before probing")
+            self._fault("float, ohmic or breakaway active before the torch start")
             return
         self.error = ""
         self.thc.reset()
         self.voltage_offset_v = 0.0
+        if relay or not self.g200_active:
+            # The program did its own probe and Z moves: the torch relay, and the THC if the
+            # program switches it on. The work Z origin is the cut's datum.
+            self.cut = _Cut(self.work_zero_mm, probed=False, start_xy=xy_mm, relay=True)
+            self._torch_on()
+            return
         if self._may_skip_probe(xy_mm):
             assert self.last_zero_mm is not None
             self.cut = _Cut(self.last_zero_mm, probed=False, start_xy=xy_mm)
@@ -305,6 +335,83 @@ class CutSequence:
         self._emit(act.SwitchOhmicSense(True))
         self._enter(State.OHMIC_TEST, 0.1)
 
+    @property
+    def work_zero_mm(self) -> float:
+        """Machine Z of work Z 0: the program's origin (G92, G10 L20), else the last probed
+        surface, else the highest the surface may be (``probe_height_mm`` above Z min, where
+        the first probe starts): with the surface unknown, a program's Z never goes lower."""
+        if self.work_origin_mm is not None:
+            return self.work_origin_mm
+        if self.last_zero_mm is not None:
+            return self.last_zero_mm
+        return self.config.z_min_mm + self.config.probe_height_mm
+
+    @property
+    def in_relay_cut(self) -> bool:
+        return self.cut is not None and self.cut.relay and self.state is State.CUTTING
+
+    def move_z(self, now: float, target_mm: float, feed_mm_s: float) -> str | None:
+        """A program's Z move, in machine Z: answered (CommandReply "Z") when done. Returns
+        why it was ignored instead: during an automatic cut (PlasmaC strips them), or while
+        the THC holds the height of a relay cut; warned once per cut."""
+        self.now = now
+        cut = self.cut
+        if self.busy and not (self.in_relay_cut and not self.thc_enabled):
+            reason = f"Z move ignored during the cut ({self.state})"
+            if cut is not None and not cut.z_warned:
+                cut.z_warned = True
+                self.warnings.append(reason)
+            return reason
+        cfg = self.config
+        top = cfg.z_max_mm - cfg.top_margin_mm
+        clamped = min(max(target_mm, cfg.z_min_mm), top)
+        if clamped != target_mm:
+            self.warnings.append(f"Z {target_mm:.3f} outside travel: moved to {clamped:.3f}")
+        self._pending_reply = "Z"
+        if self.state is State.IDLE:
+            self._enter(State.Z_MOVE)
+        self._move(clamped, feed_mm_s)
+        return None
+
+    def probe_surface(
+        self, now: float, target_mm: float, feed_mm_s: float, require_contact: bool
+    ) -> None:
+        """The program's own probe (G38.2/G38.3): the board probes down with the touch-off
+        sensors and stops on contact. Answered (CommandReply "probe") with the outcome."""
+        self.now = now
+        self._pending_reply = "probe"
+        travel = self._z_mm - max(target_mm, self.config.z_min_mm)
+        if math.isnan(travel) or travel <= 0:
+            self._reply(False, f"probe target {target_mm:.3f} is not below the torch")
+            return
+        self._probe_requires_contact = require_contact
+        self._enter(State.PROGRAM_PROBE)
+        ohmic = self.params.ohmic
+        if ohmic:
+            self._emit(act.SwitchOhmicSense(True))
+        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, True))
+
+    def set_work_z(self, z_mm: float | None) -> None:
+        """G92 Z / G10 L20 Z: the current Z reads ``z_mm``; None (G92.1) clears the origin."""
+        if z_mm is None:
+            self.work_origin_mm = None
+            return
+        if math.isnan(self._z_mm):
+            raise ValueError("the torch's Z is not known yet (is the board online?)")
+        self.work_origin_mm = self._z_mm - z_mm
+
+    def enable_torch(self, enabled: bool) -> None:
+        """PlasmaC M62-M65 P3. Disabled during a cut: the torch goes off and motion goes on
+        (the hole over-cut), the THC holds Z and a missing arc is expected until M5.
+        Enabling never relights a cut: it counts from the next M3 (a disabled M3 runs the
+        sequence without firing the torch, as PlasmaC's torch-disabled mode)."""
+        self.torch_enabled = enabled
+        if not enabled and self.state in (
+            State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
+            State.CUTTING,
+        ):  # fmt: skip
+            self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0))
+
     # --- events from the board -------------------------------------------------------------
 
     def on_inputs(self, bits: int, z_mm: float, now: float) -> None:
@@ -357,7 +464,7 @@ class CutSequence:
         return self.cut is not None and self.cut.arc_ok_since is not None
 
     def _arc_ok(self) -> bool:
-        if self.config.dry_run:
+        if self.config.dry_run or not self.torch_enabled:
             return True
         if self.mode is ThcMode.VOLTAGE_ONLY:
             return self._voltage_arc_ok()
@@ -375,6 +482,16 @@ class CutSequence:
     def on_probe_done(
         self, contact: bool, ohmic: bool, contact_z_mm: float, stop_z_mm: float
     ) -> None:
+        if self.state is State.PROGRAM_PROBE:
+            self._z_mm = stop_z_mm
+            if self.params.ohmic:
+                self._emit(act.SwitchOhmicSense(False))
+            self._enter(State.IDLE)
+            if contact or not self._probe_requires_contact:
+                self._reply(True)
+            else:
+                self._reply(False, "no contact while probing (plate missing or Z min reached)")
+            return
         if self.state is not State.PROBING or self.cut is None:
             return
         cfg = self.config
@@ -417,6 +534,11 @@ class CutSequence:
             State.S1_LOWER,
         ):
             self._fault(f"Z move did not complete ({state})")
+            return
+        if state is State.Z_MOVE or (state is State.CUTTING and self._pending_reply == "Z"):
+            if state is State.Z_MOVE:
+                self._enter(State.IDLE)
+            self._reply(reached, "" if reached else f"Z stopped at {z_mm:.3f} mm")
             return
         if state is State.TO_PROBE_HEIGHT:
             assert self.cut is not None
@@ -496,11 +618,16 @@ class CutSequence:
         self.thc.observe_speed(xy_speed_mm_s, self._requested_mm_s, now)
         dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
         self._last_thc_t = now
-        if self.state is State.CUTTING:
+        if self.state is State.CUTTING and not self._z_is_programs():
             self._cutting_step(volts, period_s, dt)
         else:
             self.thc.filter(volts, period_s, now)
         self.tick(now)
+
+    def _z_is_programs(self) -> bool:
+        """A relay cut with the THC off: Z is the program's (no velocity stream, which would
+        supersede its moves on the board)."""
+        return self.in_relay_cut and not self.thc_enabled
 
     def _cutting_step(self, volts: Sequence[float], period_s: float, dt: float) -> None:
         cut = self.cut
@@ -524,7 +651,7 @@ class CutSequence:
         # has had time to drift away from the height that was just probed.
         arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
         delay_done = now - arc_ok_since >= cfg.thc_delay_s
-        arc_lost_running = cut.arc_lost_since is not None
+        arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled
         self.thc.frozen = self.thc.target_v is None or arc_lost_running
         if delay_done and settled and self.thc.target_v is None:
             self.thc.filter(volts, period_s, now)
@@ -587,7 +714,9 @@ class CutSequence:
             if self._arc_ok():
                 cut.arc_ok_since = now
                 self.pierce_count += 1
-                if cut.relit:
+                if cut.relay:
+                    self._start_cutting()  # the program does its own pierce delay
+                elif cut.relit:
                     self._enter(State.TO_CUT_HEIGHT)
                     self._start_cutting()
                 else:
@@ -662,7 +791,7 @@ class CutSequence:
         assert cut is not None
         cut.attempts += 1
         self._voltages.clear()
-        if not self.config.dry_run:
+        if not self.config.dry_run and self.torch_enabled:
             self._emit(act.SwitchTorch(True))
         self._enter(State.ARC_WAIT, self.config.arc_ok_timeout_s)
 
@@ -703,6 +832,10 @@ class CutSequence:
     def _end_cut(self) -> None:
         self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
         self._emit(act.SetZVelocity(0.0), act.SwitchTorch(False))
+        if self.cut is not None and self.cut.relay:
+            self._enter(State.IDLE)  # the program raises Z itself (its G0 Z after M5)
+            self._reply(True)
+            return
         if self.cut is not None and not math.isnan(self.cut.zero_mm):
             self._update_safe_z()
         self._enter(State.TO_SAFE)

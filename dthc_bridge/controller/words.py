@@ -1,7 +1,8 @@
 """G-code words: the one tokeniser behind the daemon's parser, the sender, the mock and the bench.
 
-A word is a letter (either case, kept upper case) and a number with optional sign and
-decimals; blanks between words, and between a letter and its number, are optional
+A word is a letter (either case, kept upper case; ``$``, PlasmaC's tool selector, counts as
+one) and a number with optional sign and decimals; blanks between words, and between a
+letter and its number, are optional
 (``G01X10.5Y-.5F1500``, ``M3S1``). ``(...)`` and ``;`` comments are removed and returned; a
 line holding only ``%`` (the program delimiter) is empty. Anything else (``#1``, ``[...]``,
 ``/``, ``=``, a number without a letter) is refused with :class:`GcodeSyntaxError` naming it.
@@ -73,7 +74,8 @@ class Tokens:
 
 
 def _is_letter(ch: str) -> bool:
-    return ch.isascii() and ch.isalpha()
+    # "$" is PlasmaC's tool word (``M3 $0 S1``), read like a letter.
+    return (ch.isascii() and ch.isalpha()) or ch == "$"
 
 
 def tokenize(line: str) -> Tokens:

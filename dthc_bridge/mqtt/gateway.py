@@ -30,6 +30,7 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from ..backoff import backoff_delay_s
+from ..controller.dialect import Dialect
 from .outbox import Outbox, Outgoing
 from .payloads import (
     GcodeRequest,
@@ -118,6 +119,7 @@ class MqttGateway:
         self._connected = asyncio.Event()
         self._last_state: bytes | None = None
         self._last_board: bytes | None = None
+        self._last_materials: bytes | None = None
         self._failing: set[str] = set()  # controller getters currently raising (log once)
 
     # --- public ------------------------------------------------------------------------------
@@ -247,8 +249,10 @@ class MqttGateway:
         await client.publish(self.topics.availability, ONLINE, qos=1, retain=True)
         self._last_board = None
         self._last_state = None
+        self._last_materials = None
         await self._publish_board(client)
         await self._publish_state(client)
+        await self._publish_materials(client)
         await self._publish_diagnostics(client)
 
     async def _goodbye(self, client: aiomqtt.Client) -> None:
@@ -411,7 +415,10 @@ class MqttGateway:
     async def _execute(self, name: str, request: GcodeRequest | Request) -> CommandResult:
         if isinstance(request, GcodeRequest):
             return await self.controller.execute_gcode(
-                request.line, line_number=request.line_number, xy_mm=request.xy_mm
+                request.line,
+                line_number=request.line_number,
+                xy_mm=request.xy_mm,
+                dialect=None if request.dialect is None else Dialect(request.dialect),
             )
         return await self.controller.execute_request(name, request.args)
 
@@ -517,6 +524,16 @@ class MqttGateway:
             self._last_board = payload
             self.stats.published += 1
 
+    async def _publish_materials(self, client: aiomqtt.Client) -> None:
+        document = self._safely("materials", self.controller.materials)
+        if document is None:
+            return
+        payload = encode_json(document)
+        if payload != self._last_materials:
+            await client.publish(self.topics.materials, payload, qos=1, retain=True)
+            self._last_materials = payload
+            self.stats.published += 1
+
     async def _publish_diagnostics(self, client: aiomqtt.Client) -> None:
         document: dict[str, object] = dict(
             self._safely("diagnostics", self.controller.diagnostics) or {}
@@ -530,6 +547,7 @@ class MqttGateway:
             await asyncio.sleep(self.settings.state_poll_s)
             await self._publish_board(client)
             await self._publish_state(client)
+            await self._publish_materials(client)
 
     async def _send_diagnostics(self, client: aiomqtt.Client) -> None:
         while True:

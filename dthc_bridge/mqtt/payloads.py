@@ -10,7 +10,7 @@ import contextlib
 import json
 import math
 from collections.abc import Mapping
-from typing import Any, Final, Self
+from typing import Any, Final, Literal, Self
 
 from pydantic import (
     BaseModel,
@@ -101,6 +101,8 @@ class GcodeRequest(_RequestBase):
     y: float | None = Field(
         default=None, ge=-MAX_COORDINATE_MM, le=MAX_COORDINATE_MM, allow_inf_nan=False
     )
+    # The program's dialect (dthc_bridge.controller.dialect); absent: the daemon's own.
+    dialect: Literal["masso", "plasmac", "rosetta", "relay"] | None = None
 
     @field_validator("line")
     @classmethod

@@ -11,6 +11,7 @@ from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from ..controller.dialect import Dialect
 from ..events import ControllerEvent
 
 __all__ = ["CommandResult", "ControllerPort"]
@@ -27,9 +28,17 @@ class CommandResult:
 
 class ControllerPort(Protocol):
     async def execute_gcode(
-        self, line: str, *, line_number: int | None, xy_mm: tuple[float, float] | None
+        self,
+        line: str,
+        *,
+        line_number: int | None,
+        xy_mm: tuple[float, float] | None,
+        dialect: Dialect | None = None,
     ) -> CommandResult:
         """Run one G-code line; M3 returns when XY motion may start (seconds).
+
+        ``dialect``: the program's (:mod:`dthc_bridge.controller.dialect`); None = the
+        daemon's configured one.
 
         The gateway cancels the call when the request's deadline passes: a cancelled
         command must end safely (a cancelled M3 aborts the cut).
@@ -46,6 +55,10 @@ class ControllerPort(Protocol):
 
     def snapshot(self) -> dict[str, object]:
         """The retained state document (JSON-able)."""
+        ...
+
+    def materials(self) -> dict[str, object]:
+        """The retained material library document (JSON-able)."""
         ...
 
     def link_state(self) -> tuple[str, str]:

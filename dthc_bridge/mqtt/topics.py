@@ -15,7 +15,9 @@ __all__ = [
 REQUEST_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
 
 # Topics the gateway publishes (or listens on) under its root; used to refuse overlaps.
-_OWN_LEAVES = ("state", "availability", "board", "event", "telemetry", "diagnostics")
+_OWN_LEAVES = (
+    "state", "availability", "board", "event", "telemetry", "diagnostics", "materials",
+)  # fmt: skip
 _OWN_TREES = ("request", "response", "reply")
 
 
@@ -63,6 +65,10 @@ class Topics:
     @property
     def diagnostics(self) -> str:
         return f"{self.root}/diagnostics"
+
+    @property
+    def materials(self) -> str:
+        return f"{self.root}/materials"
 
     def request_name(self, topic: str) -> str | None:
         """The part after ``request/`` (maybe empty or invalid), or None for other topics."""

@@ -10,10 +10,15 @@ from __future__ import annotations
 
 import asyncio
 import json
+import shutil
 import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
+
+from dthc_bridge.controller.dialect import Dialect
 
 from .plot import plot_run
 from .stack import Stack, StackOptions, StackResult
@@ -30,30 +35,54 @@ TELEMETRY_HZ = 50.0
 
 
 def program_lines(name: str) -> list[str]:
+    """A built-in program by name, else the lines of the file ``name``."""
+    if name not in PROGRAMS:
+        return Path(name).read_text(encoding="utf-8", errors="replace").splitlines()
     text = resources.files("dthc_tools.demo").joinpath("programs", f"{name}.ngc").read_text()
     return text.splitlines()
 
 
-async def _run(program: str, workdir: Path, broker: str) -> StackResult:
-    scenario, _ = PROGRAMS[program]
-    options = StackOptions(workdir, scenario=scenario, broker=broker, telemetry_hz=TELEMETRY_HZ)
+@dataclass(frozen=True)
+class DemoRun:
+    program: str
+    scenario: str
+    materials: Path | None = None
+    dialect: Dialect | None = None
+    codes: Mapping[str, str] = field(default_factory=dict)
+
+
+async def _run(run: DemoRun, workdir: Path, broker: str) -> StackResult:
+    materials = None
+    if run.materials is not None:  # the daemon writes its library: work on a copy
+        materials = workdir / "materials.cfg"
+        shutil.copyfile(run.materials, materials)
+    options = StackOptions(
+        workdir, scenario=run.scenario, broker=broker, telemetry_hz=TELEMETRY_HZ,
+        materials_file=materials,
+    )  # fmt: skip
     async with Stack(options) as stack:
-        report = await stack.send(program_lines(program))
+        report = await stack.send(program_lines(run.program), dialect=run.dialect, codes=run.codes)
         return await stack.finish(report)
 
 
 def run_demo(
     *, as_json: bool = False, program: str = "masso_sample", plot: Path | None = None,
-    broker: str = "auto",
+    broker: str = "auto", scenario: str | None = None, materials: Path | None = None,
+    dialect: Dialect | None = None, codes: Mapping[str, str] | None = None,
 ) -> int:  # fmt: skip
+    """The whole stack over ``program``: a built-in name or a G-code file."""
+    default_scenario, cut_height_mm = PROGRAMS.get(program, ("flat_clean", 1.5))
+    run = DemoRun(program, scenario or default_scenario, materials, dialect, dict(codes or {}))
     with tempfile.TemporaryDirectory(prefix="dthc-demo-") as tmp:
-        result = asyncio.run(_run(program, Path(tmp), broker))
+        result = asyncio.run(_run(run, Path(tmp), broker))
         summary = summarize(result, TELEMETRY_HZ)
         plot = plot or Path("out") / "demo.png"
         plot.parent.mkdir(parents=True, exist_ok=True)
-        plot_run(result.telemetry, result.truth_path, PROGRAMS[program][1], plot)
+        plot_run(result.telemetry, result.truth_path, cut_height_mm, plot)
     summary["program"] = program
-    summary["scenario"] = PROGRAMS[program][0]
+    summary["scenario"] = run.scenario
+    summary["dialect"] = result.report.dialect
+    summary["warnings"] = result.report.warnings
     summary["plot"] = str(plot)
     ok = (
         summary["safety_violations"] == 0

@@ -1,4 +1,5 @@
-"""``dthc-bridge demo [--program NAME] [--json] [--plot PNG] [--broker KIND]``."""
+"""``dthc-bridge demo [--program NAME|PATH] [--scenario NAME] [--materials FILE]
+[--dialect NAME] [--code CODE=LINE] [--json] [--plot PNG] [--broker KIND]``."""
 
 from __future__ import annotations
 
@@ -7,9 +8,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from dthc_bridge.program.options import add_dialect_options
+
 from . import PROGRAMS, run_demo
 
 __all__ = ["build_parser", "main"]
+
+SCENARIOS = sorted(
+    p.stem for p in (Path(__file__).parents[2] / "mock_device" / "scenarios").glob("*.toml")
+)
 
 
 def build_parser(prog: str = "dthc-bridge demo") -> argparse.ArgumentParser:
@@ -17,12 +24,31 @@ def build_parser(prog: str = "dthc-bridge demo") -> argparse.ArgumentParser:
         prog=prog, description="Run everything end to end on embedded defaults."
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--program", default="masso_sample", choices=sorted(PROGRAMS))
+    parser.add_argument(
+        "--program",
+        default="masso_sample",
+        help=f"a built-in program ({', '.join(sorted(PROGRAMS))}) or a G-code file",
+    )
+    parser.add_argument(
+        "--scenario", default=None, help="the mock's plant (default: the program's, or flat_clean)"
+    )
+    parser.add_argument(
+        "--materials", type=Path, default=None, help="the daemon's material file (QtPlasmaC)"
+    )
+    add_dialect_options(parser)
     parser.add_argument("--plot", type=Path, help="PNG to write (default out/demo.png)")
     parser.add_argument("--broker", default="auto", choices=["auto", "mosquitto", "amqtt"])
     return parser
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge demo") -> int:
-    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
-    return run_demo(as_json=args.json, program=args.program, plot=args.plot, broker=args.broker)
+    parser = build_parser(prog)
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    if args.program not in PROGRAMS and not Path(args.program).is_file():
+        parser.error(f"--program: {args.program!r} is neither a built-in program nor a file")
+    if args.materials is not None and not args.materials.is_file():
+        parser.error(f"--materials: {str(args.materials)!r} is not a file")
+    return run_demo(
+        as_json=args.json, program=args.program, plot=args.plot, broker=args.broker,
+        scenario=args.scenario, materials=args.materials, dialect=args.dialect, codes=args.codes,
+    )  # fmt: skip

@@ -19,11 +19,14 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import aiomqtt
+
+from dthc_bridge.controller.dialect import Dialect
 
 from ..procs import die_with_parent
 from ..sender import DaemonClient, Sender, SendReport, SimGantryBackend
@@ -50,6 +53,7 @@ class StackOptions:
     telemetry_hz: float = 50.0
     mock_args: tuple[str, ...] = ()
     daemon_env: dict[str, str] = field(default_factory=dict)
+    materials_file: Path | None = None  # the daemon's material library (QtPlasmaC format)
 
 
 @dataclass
@@ -204,6 +208,11 @@ class Stack:
             f"state_poll_s = 0.05\nreconnect_initial_s = 0.1\nreconnect_max_s = 1.0\n\n"
             f'[logging]\nlevel = "info"\njson_logs = true\n'
         )
+        if self.options.materials_file is not None:
+            with config.open("a") as toml:
+                toml.write(
+                    f"\n[controller]\nmaterials_file = {str(self.options.materials_file)!r}\n"
+                )
         self.daemon = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
             [sys.executable, "-m", "dthc_bridge", "run", "--config", str(config)],
             stdout=self._log("daemon.log"), stderr=subprocess.STDOUT,
@@ -262,14 +271,22 @@ class Stack:
         )  # fmt: skip
 
     async def send(
-        self, lines: list[str], *, start_line: int = 1, daemon: DaemonClient | None = None
+        self,
+        lines: list[str],
+        *,
+        start_line: int = 1,
+        daemon: DaemonClient | None = None,
+        dialect: Dialect | None = None,
+        codes: Mapping[str, str] | None = None,
     ) -> SendReport:
         """Run the sender over ``lines``; ``daemon`` must not be connected yet."""
         daemon = daemon or self.daemon_client()
         backend = SimGantryBackend("127.0.0.1", self.gantry_port)
         async with daemon.connected():
             try:
-                return await Sender(daemon, backend).run(lines, start_line=start_line)
+                return await Sender(daemon, backend).run(
+                    lines, start_line=start_line, dialect=dialect, codes=codes
+                )
             finally:
                 await backend.close()
 

@@ -49,7 +49,9 @@ def summarize(result: StackResult, telemetry_hz: float) -> dict[str, Any]:
     errors += [
         f"{e.get('type')}: {e.get('reason') or e.get('code')}"
         for e in result.events
-        if e.get("topic") == "event" and e.get("type") in ("fault", "arc_lost", "pause")
+        if e.get("topic") == "event"
+        and e.get("type") in ("fault", "arc_lost", "pause")
+        and e.get("cause") != "stop_after_pierce"  # G200 S1: the program asked for it
     ]
     violations: dict[str, int] = result.mock_exit.get("violations", {})
     measured = [c for c in cuts if c["arc_on_s"] > 0]

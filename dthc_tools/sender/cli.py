@@ -11,6 +11,8 @@ from pathlib import Path
 
 import aiomqtt
 
+from dthc_bridge.program.options import add_dialect_options
+
 from .backend import SimGantryBackend
 from .daemon_client import DaemonClient
 from .sender import Sender
@@ -30,6 +32,7 @@ def build_parser(prog: str = "dthc-bridge send") -> argparse.ArgumentParser:
     parser.add_argument("--backend", default="sim", choices=["sim"])
     parser.add_argument("--gantry", default="socket://127.0.0.1:7001", help="sim backend port")
     parser.add_argument("--start-line", type=int, default=1, help="e.g. a G100 P0 resume point")
+    add_dialect_options(parser)
     parser.add_argument("--json", action="store_true")
     return parser
 
@@ -51,7 +54,9 @@ async def _send(args: argparse.Namespace) -> int:
     )
     backend = SimGantryBackend(gantry_host, gantry_port)
     async with daemon.connected():
-        report = await Sender(daemon, backend).run(lines, start_line=args.start_line)
+        report = await Sender(daemon, backend).run(
+            lines, start_line=args.start_line, dialect=args.dialect, codes=args.codes
+        )
     await backend.close()
     if args.json:
         print(json.dumps(report.as_dict()))

@@ -127,9 +127,16 @@ class DaemonClient:
         return data
 
     async def gcode(
-        self, line: str, *, line_number: int | None = None, xy: tuple[float, float] | None = None
+        self,
+        line: str,
+        *,
+        line_number: int | None = None,
+        xy: tuple[float, float] | None = None,
+        dialect: str | None = None,
     ) -> dict[str, Any]:
         args: dict[str, Any] = {"line": line}
+        if dialect is not None:
+            args["dialect"] = dialect
         if line_number is not None:
             args["line_number"] = line_number
         if xy is not None:

@@ -1,17 +1,20 @@
 """The reference sender: runs a G-code program against the daemon and a motion backend.
 
-Plasma lines go to the daemon (in program order: after the motion queued before them has
-finished) and the sender waits for each answer; M3 returns when XY motion may start.
-Motion lines go to the backend, and lines with a feed also to the daemon, which uses the
-programmed feed as the anti-dive reference. A pause request from the daemon (arc lost, a
-fault), or the daemon going offline, holds the motion and stops the program at once;
-RosettaCNC ``G100 P0`` lines are resume
-points the program can be restarted from after the operator has re-armed.
+The program is planned by :class:`dthc_bridge.program.ProgramPlan` (dialect rules, NGC
+evaluation, Z to the board); the sender carries the steps out. Daemon lines go in program
+order (after the motion queued before them has finished) and the sender waits for each
+answer; M3 returns when XY motion may start. Motion lines go to the backend; a feed note
+tells the daemon the programmed cutting feed (the anti-dive reference). ``G4`` dwells
+after motion has finished. A pause request from the daemon (arc lost, a fault), or the
+daemon going offline, holds the motion and stops the program at once; RosettaCNC ``G100
+P0`` lines are resume points the program can be restarted from after the operator has
+re-armed.
 """
 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,8 +28,18 @@ from dthc_bridge.controller.commands import (
     TorchStart,
     VelocityReduction,
 )
+from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.words import Word, tokenize
+from dthc_bridge.program.plan import (
+    DaemonStep,
+    DwellStep,
+    MotionStep,
+    ProgramPlan,
+    Refused,
+    Step,
+    detect_dialect,
+)
 
 from .backend import BackendError, MotionBackend
 from .daemon_client import DaemonClient, DaemonError
@@ -34,10 +47,6 @@ from .daemon_client import DaemonClient, DaemonError
 __all__ = ["SendReport", "Sender"]
 
 log = structlog.get_logger("dthc_tools.sender")
-
-# Lines holding only these modal G codes (plane, units, offsets, cycles, distance and feed
-# mode) are not passed to the backend.
-_MODAL_ONLY_G = frozenset({17.0, 20.0, 21.0, 40.0, 49.0, 80.0, 90.0, 91.0, 94.0})
 
 
 @dataclass
@@ -49,6 +58,8 @@ class SendReport:
     error_line: int | None = None
     resume_points: list[int] = field(default_factory=list)  # program line numbers of P0
     paused: list[str] = field(default_factory=list)
+    dialect: str = ""
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -67,7 +78,7 @@ class SendReport:
             "ok": self.ok, "lines_sent": self.lines_sent, "plasma_commands": self.plasma_commands,
             "cuts_started": self.cuts_started, "error": self.error, "error_line": self.error_line,
             "resume_points": self.resume_points, "resume_from": self.resume_from,
-            "paused": self.paused,
+            "paused": self.paused, "dialect": self.dialect, "warnings": self.warnings,
         }  # fmt: skip
 
 
@@ -87,19 +98,46 @@ class Sender:
         self._pause.set()
 
     def _on_event(self, event: dict[str, Any]) -> None:
+        if event.get("cause") == "stop_after_pierce":
+            # G200 S1: the pending M3 is answered once the operator presses cycle start.
+            log.warning("waiting_for_cycle_start", reason=event.get("reason"))
+            return
         if event.get("type") in ("pause", "arc_lost"):
             self._pause_reason = str(event.get("reason", event.get("type")))
             self._pause.set()
 
-    async def run(self, lines: list[str], *, start_line: int = 1) -> SendReport:
-        """Send lines ``start_line``.. (1-based) of the program; stop at the first error."""
+    async def run(
+        self,
+        lines: Sequence[str],
+        *,
+        start_line: int = 1,
+        dialect: Dialect | None = None,
+        codes: Mapping[str, str] | None = None,
+    ) -> SendReport:
+        """Send the program from ``start_line`` (1-based); stop at the first error.
+
+        ``dialect``: None detects it (:func:`~dthc_bridge.program.plan.detect_dialect`);
+        ``codes`` maps a shop's own codes to the daemon's (``{"H1": "M667"}``)."""
         report = SendReport()
         self._pause.clear()
-        for number, line in enumerate(lines, start=1):
+        self.velocity_percent = 100.0
+        if dialect is None:
+            dialect, why = detect_dialect(lines)
+            log.info("dialect_detected", dialect=str(dialect), why=why)
+        report.dialect = str(dialect)
+        plan = ProgramPlan(lines, dialect, dict(codes or {}))
+        try:
+            await self.daemon.request("program_start")
+        except DaemonError as exc:
+            report.error, report.error_line = str(exc), start_line
+            return report
+        number = start_line
+        for step in plan.steps():
+            number = step.source_line
             if number < start_line:
                 continue
             try:
-                await self._line(number, line, report)
+                await self._step(step, plan, report)
             except (CommandError, DaemonError, BackendError) as exc:
                 report.error, report.error_line = str(exc), number
             if self._pause.is_set() and not report.error:
@@ -108,10 +146,12 @@ class Sender:
                 report.paused.append(self._pause_reason or report.error)
                 await self._hold()
                 log.warning("program_stopped", line=number, error=report.error)
+                report.warnings = plan.warnings
                 return report
         await self.backend.wait_idle()
         if self._pause.is_set():
-            report.error, report.error_line = f"paused: {self._pause_reason}", len(lines)
+            report.error, report.error_line = f"paused: {self._pause_reason}", number
+        report.warnings = plan.warnings
         return report
 
     async def _hold(self) -> None:
@@ -120,33 +160,44 @@ class Sender:
         except BackendError as exc:
             log.error("hold_failed", error=str(exc))
 
-    async def _line(self, number: int, line: str, report: SendReport) -> None:
-        parsed = parse_line(line, line_number=number)
-        if parsed.commands:
-            xy = await self._wait_motion()
-            if self._pause.is_set():
-                return
-            await self.daemon.gcode(line, line_number=number, xy=xy)
+    async def _step(self, step: Step, plan: ProgramPlan, report: SendReport) -> None:
+        if isinstance(step, Refused):
+            raise CommandError("", step.error)
+        if isinstance(step, MotionStep):
+            words = tokenize(step.line).words  # the plan has checked every number
+            await self.backend.queue(self._reduced(step.line, words))
             report.lines_sent += 1
-            report.plasma_commands += len(parsed.commands)
-            for command in parsed.commands:
-                if isinstance(command, ResumePoint):
-                    report.resume_points.append(number)
-                if isinstance(command, VelocityReduction):
-                    self.velocity_percent = command.percent if command.percent > 0 else 100.0
-                if starts_cut(command):
-                    report.cuts_started += 1
             return
-        motion = parsed.motion
-        if motion is None:
+        if isinstance(step, DwellStep):
+            await self._wait_motion()
+            if not self._pause.is_set():
+                await asyncio.sleep(step.seconds)
             return
-        words = tokenize(motion).words  # parse_line has checked every number
-        if all(w.letter == "G" and w.value in _MODAL_ONLY_G for w in words):
+        dialect = str(plan.dialect)
+        if step.feed_note:
+            await self.daemon.gcode(step.line, line_number=step.source_line, dialect=dialect)
             return
-        if any(w.letter == "F" for w in words):
-            await self.daemon.gcode(motion, line_number=number)  # the programmed feed
-        await self.backend.queue(self._reduced(motion, words))
+        await self._daemon_line(step, plan, report)
+
+    async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
+        parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
+        xy = await self._wait_motion()
+        if self._pause.is_set():
+            return
+        data = await self.daemon.gcode(
+            step.line, line_number=step.source_line, xy=xy, dialect=str(plan.dialect)
+        )
+        if isinstance(data.get("cut_feed"), int | float):
+            plan.cut_feed = float(data["cut_feed"])  # #<_hal[plasmac.cut-feed-rate]>
         report.lines_sent += 1
+        report.plasma_commands += len(parsed.commands)
+        for command in parsed.commands:
+            if isinstance(command, ResumePoint):
+                report.resume_points.append(step.source_line)
+            if isinstance(command, VelocityReduction):
+                self.velocity_percent = command.percent if command.percent > 0 else 100.0
+            if starts_cut(command):
+                report.cuts_started += 1
 
     def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
         """The line as the machine runs it: feed scaled by a velocity reduction."""

@@ -24,6 +24,7 @@ from dthc_bridge.controller.commands import (
     OperatingMode,
     PlasmaMode,
     ProbeAndStart,
+    ProgramZMove,
     ResumePoint,
     SelectCurrent,
     SetCutParams,
@@ -89,17 +90,21 @@ def test_masso_sample_program_gives_the_plasma_command_sequence() -> None:
     program = sample_program()
     assert len(program) == 39
     sequence = [cmd for line in program for cmd in parse_line(line).commands]
+    safe_z = ProgramZMove(20.0)  # "G00 Z20.000 (Safe Z move)": Z belongs to the board
     assert sequence == [
         PlasmaMode(112),
         SAMPLE_G200,
+        safe_z,
         TorchStart(),
         ThcEnable(True, z_feed_mm_min=600.0),
         ThcEnable(False),
         TorchStop(),
+        safe_z,
         TorchStart(),
         ThcEnable(True, z_feed_mm_min=600.0),
         ThcEnable(False),
         TorchStop(),
+        safe_z,
     ]
     assert PlasmaMode(112).enabled
 
@@ -332,7 +337,6 @@ def test_g100_machine_functions_are_not_plasma_functions(line: str, word: str, w
         "( © 2020 by RosettaCNC Motion             )",
         "G21 G40 G49 G90 G54 G50 G69",
         "G101 P47 ; Axes X,Y,Z,A,C will be interpolated",
-        "G0 X0 Y0 Z0 A45 C90",
         "G10 L101 P550 V1",
         "G1 X10 ",
         "M2",
@@ -426,7 +430,7 @@ def test_plasmac_m67_m68_e3_reduce_velocity(line: str, expected: VelocityReducti
     ("line", "word", "reason"),
     [
         ("M62 P1", "M62 P1", "not a plasma function of ours"),
-        ("M63 P3", "M63 P3", "not a plasma function of ours"),
+        ("M63 P1", "M63 P1", "not a plasma function of ours"),
         ("M64 P0", "M64 P0", "not a plasma function of ours"),
         ("M65", "M65 P", "required parameter is missing"),
         ("M62 P2 Q1", "M62 Q", "unknown parameter"),
@@ -454,7 +458,7 @@ def test_plasmac_errors_name_the_word(line: str, word: str, reason: str) -> None
         ("G200 Q5", "G200 Q", "unknown parameter"),
         ("G200 F150 X5", "G200 X", "unknown parameter"),
         ("X5 G200 F150", "G200 X", "unknown parameter"),
-        ("M3 S1000", "M3 S", "unknown parameter"),
+        ("M3 P1000", "M3 P", "unknown parameter"),
         ("M666 F500", "M666 F", "unknown parameter"),
         ("T112 M6 F5", "M6 F", "unknown parameter"),
         ("G200 F", "G200 F", "missing value"),
@@ -563,7 +567,7 @@ def test_line_number_comes_from_n_else_from_the_caller() -> None:
         ("T5", "T5"),
         ("M30", "M30"),
         ("M8", "M8"),
-        ("G38.2 Z-10 F100", "G38.2 Z-10 F100"),
+        ("G10 L2 P1 X0 Y0", "G10 L2 P1 X0 Y0"),
         ("G200.5", "G200.5"),
         ("G1  X10\tY5 ", "G1  X10\tY5"),
         ("N3G1X1(c)Y2", "G1X1 Y2"),

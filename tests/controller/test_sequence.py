@@ -228,14 +228,11 @@ def test_ohmic_test_in_the_air_passes() -> None:
     assert loop.sequence.error == ""
 
 
-def test_m3_outside_plasma_mode_or_in_legacy_mode_is_refused() -> None:
-    """M3 without T112 M6, or after a bare G200, gets a clear error and changes nothing."""
+def test_m3_outside_plasma_mode_is_refused() -> None:
+    """M3 without T112 M6 gets a clear error and changes nothing."""
     loop = ready()
     loop.sequence.plasma_mode = False
     assert "T112 M6" in loop.m3().error
-    loop.sequence.plasma_mode = True
-    loop.sequence.g200_active = False
-    assert "legacy" in loop.m3().error
     assert loop.sequence.state is State.IDLE
 
 

@@ -6,6 +6,7 @@ import asyncio
 import re
 from collections.abc import AsyncIterator, Mapping
 
+from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.events import ControllerEvent
 from dthc_bridge.mqtt import CommandResult
 
@@ -28,14 +29,21 @@ class FakeController:
         self.point: dict[str, object] | None = None
         self._events: asyncio.Queue[ControllerEvent] = asyncio.Queue()
         self.called = asyncio.Event()  # set on every execute_* call
+        self.dialects: list[Dialect | None] = []
         self._lost = asyncio.Event()
 
     # --- ControllerPort --------------------------------------------------------------------
 
     async def execute_gcode(
-        self, line: str, *, line_number: int | None, xy_mm: tuple[float, float] | None
+        self,
+        line: str,
+        *,
+        line_number: int | None,
+        xy_mm: tuple[float, float] | None,
+        dialect: Dialect | None = None,
     ) -> CommandResult:
         self.gcode_calls.append((line, line_number, xy_mm))
+        self.dialects.append(dialect)
         self.called.set()
         try:
             if line.strip().upper().startswith("M3"):
@@ -74,6 +82,9 @@ class FakeController:
 
     def link_state(self) -> tuple[str, str]:
         return self.link
+
+    def materials(self) -> dict[str, object]:
+        return {"selected": 0, "materials": []}
 
     def diagnostics(self) -> dict[str, object]:
         return dict(self.diag)

@@ -7,14 +7,22 @@ from typing import Any, cast
 
 import pytest
 
+from dthc_bridge.controller.dialect import Dialect
 from dthc_tools.sender import DaemonClient, Sender
 
 
 class FakeDaemon:
-    """Records the lines the sender sends to the daemon; answers every one with ok."""
+    """Records the lines the sender sends to the daemon; answers every one with ok (an
+    ``M190`` with the material's cut feed, 2500)."""
 
     def __init__(self) -> None:
         self.lines: list[str] = []
+        self.requests: list[str] = []
+        self.dialects: set[str | None] = set()
+
+    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+        self.requests.append(name)
+        return {}
 
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         pass
@@ -23,10 +31,16 @@ class FakeDaemon:
         pass
 
     async def gcode(
-        self, line: str, *, line_number: int | None = None, xy: tuple[float, float] | None = None
+        self,
+        line: str,
+        *,
+        line_number: int | None = None,
+        xy: tuple[float, float] | None = None,
+        dialect: str | None = None,
     ) -> dict[str, Any]:
         self.lines.append(line)
-        return {}
+        self.dialects.add(dialect)
+        return {"cut_feed": 2500.0} if line.startswith("M190") else {}
 
 
 class FakeBackend:
@@ -54,37 +68,96 @@ class FakeBackend:
         pass
 
 
-async def _send(program: list[str]) -> tuple[FakeDaemon, FakeBackend]:
+async def _send(
+    program: list[str], dialect: Dialect | None = Dialect.MASSO, **codes: str
+) -> tuple[FakeDaemon, FakeBackend]:
     daemon, backend = FakeDaemon(), FakeBackend()
-    report = await Sender(cast(DaemonClient, daemon), backend).run(program)
+    report = await Sender(cast(DaemonClient, daemon), backend).run(
+        program, dialect=dialect, codes=codes
+    )
     assert report.ok, report.error
+    assert daemon.requests == ["program_start"]
     return daemon, backend
 
 
 @pytest.mark.parametrize("line", ["G21 G90", "N1 G21", "G17 (plane)", "g21g90", "G94 ; feed/min"])
-async def test_modal_only_lines_go_nowhere(line: str) -> None:
-    """Lines of only plane, unit, distance and feed-mode codes are neither queued nor sent."""
+async def test_modal_only_lines_reach_the_motion_backend(line: str) -> None:
+    """Units, distance mode and plane are the backend's state: a G91 must not be dropped."""
     daemon, backend = await _send([line])
-    assert backend.queued == []
+    assert len(backend.queued) == 1
     assert daemon.lines == []
+
+
+async def test_an_incremental_program_runs_incremental() -> None:
+    daemon, backend = await _send(["G91", "G0 X10", "G0 X10"])
+    assert backend.queued == ["G91", "G0 X10", "G0 X10"]
 
 
 @pytest.mark.parametrize(
     ("line", "motion", "to_daemon"),
     [
-        ("G1 X10 F1500", "G1 X10 F1500", True),
-        ("N7 G01X10F1500 (compact)", "G01X10F1500", True),
-        ("G1 X10", "G1 X10", False),
-        ("G0 Z20 ; safe", "G0 Z20", False),
+        ("G1 X10 F1500", "G1 X10 F1500", ["G1 F1500"]),
+        ("N7 G01X10F1500 (compact)", "G01X10F1500", ["G1 F1500"]),
+        ("G0 X10", "G0 X10", []),
     ],
 )
-async def test_motion_is_queued_and_lines_with_a_feed_also_go_to_the_daemon(
-    line: str, motion: str, to_daemon: bool
+async def test_motion_is_queued_and_a_new_cutting_feed_is_noted_to_the_daemon(
+    line: str, motion: str, to_daemon: list[str]
 ) -> None:
-    """The backend gets the motion text; the daemon gets it too when it carries an F word."""
+    """The backend gets the motion text; the daemon a feed note when the cutting feed changes."""
     daemon, backend = await _send([line])
     assert backend.queued == [motion]
-    assert daemon.lines == ([motion] if to_daemon else [])
+    assert daemon.lines == to_daemon
+
+
+async def test_z_goes_to_the_daemon_up_first_and_down_last() -> None:
+    """Z belongs to the board; a mixed line never drags the torch. What is left of a Z-only
+    line (its modal G0) still reaches the backend."""
+    daemon, backend = await _send(["G0 Z5", "G0 X10 Y10 Z20", "G0 X50 Y5 Z3", "G0 Z20 ; safe"])
+    assert backend.queued == ["G0", "G0 X10 Y10", "G0 X50 Y5", "G0"]
+    assert daemon.lines == ["G0 Z5", "G0 Z20", "G0 Z3", "G0 Z20"]
+
+
+async def test_inch_programs_reach_the_daemon_in_millimetres() -> None:
+    daemon, backend = await _send(["G20", "G0 Z0.5", "G1 X2 F100", "G38.2 Z-2 F10"], Dialect.RELAY)
+    assert backend.queued == ["G20", "G0", "G1 X2 F100"]
+    assert daemon.lines == ["G0 Z12.7", "G1 F2540", "G38.2 Z-50.8 F254"]
+
+
+async def test_a_tool_change_passes_its_feed_to_motion() -> None:
+    daemon, backend = await _send(["M06 T1 F5840"])
+    assert backend.queued == ["F5840"]
+
+
+async def test_masso_hash_is_a_comment_and_g4_is_milliseconds() -> None:
+    daemon, backend = await _send(["G0 X1 # rapid to start", "G4 P250"])
+    assert backend.queued == ["G0 X1"]
+
+
+async def test_plasmac_program_with_material_feed_and_stripped_z() -> None:
+    """The material's feed replaces the HAL read; Z moves are stripped as PlasmaC does."""
+    program = [
+        "G21 G90", "T0 M6", "G43 H0", "M190 P3", "M66 P3 L3 Q1",
+        "F#<_hal[plasmac.cut-feed-rate]>", "G0 Z10", "G0 X5 Y5", "M3 $0 S1",
+        "G1 X50", "M5 $0",
+    ]  # fmt: skip
+    daemon, backend = await _send(program, Dialect.PLASMAC)
+    assert "F2500" in backend.queued
+    assert daemon.lines == ["T0 M6", "M190 P3", "M3 $0 S1", "G1 F2500", "M5 $0"]
+    assert daemon.dialects == {"plasmac"}
+
+
+async def test_pierce_only_pierces_and_skips_the_cut() -> None:
+    program = ["#<pierce-only> = 1", "G0 X5 Y5", "M3 $0 S1", "G1 X50 F3000", "M5 $0", "G0 X0"]
+    daemon, backend = await _send(program, Dialect.PLASMAC)
+    assert daemon.lines == ["M3 $0 S1", "M5 $0"]
+    assert backend.queued == ["G0 X5 Y5", "G0 X0"]
+
+
+async def test_shop_codes_map_to_the_daemon_commands() -> None:
+    """FireControl's H1/H0 in the relay dialect; a shop's own code from the table."""
+    daemon, _ = await _send(["M3", "H1", "H0", "M5", "M101"], Dialect.RELAY, M101="M666")
+    assert daemon.lines == ["M3", "M667", "M666", "M5", "M666"]
 
 
 async def test_a_velocity_reduction_scales_the_feed_the_machine_runs() -> None:
@@ -95,10 +168,4 @@ async def test_a_velocity_reduction_scales_the_feed_the_machine_runs() -> None:
     assert backend.queued == [
         "G1 X10 F750.0", "G1X20F1500.0Y5", "G1 X30", "G1 X40 F1500",
     ]  # fmt: skip
-    assert daemon.lines == [
-        "M67 E3 Q50",
-        "G1 X10 F1500",
-        "G1X20f3000Y5",
-        "M67 E3 Q0",
-        "G1 X40 F1500",
-    ]
+    assert daemon.lines == ["M67 E3 Q50", "G1 F1500", "G1 F3000", "M67 E3 Q0", "G1 F1500"]

@@ -1,0 +1,281 @@
+"""``dthc-bridge check-program``: a preflight a user runs before the torch fires.
+
+The program is planned exactly as the sender plans it (:class:`.plan.ProgramPlan`) and each
+daemon line is applied to a real :class:`~dthc_bridge.controller.plasma.PlasmaController`
+with no board behind it: plasma mode, G200 parameters, materials and THC switches change
+as they would, and what the daemon would refuse is refused here with the same words. A
+cut's start (``M3``, ``G100 P6``) is recorded, not run: the report lists, per cut, the
+parameters in force. Z moves, probes and origins need a board, so they are only planned.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from ..controller.commands import (
+    CommandError,
+    DefineMaterial,
+    ProbeAndStart,
+    ProbeSurface,
+    ProgramZMove,
+    SelectMaterial,
+    SetWorkZ,
+    TorchStart,
+    TorchStop,
+)
+from ..controller.dialect import Dialect
+from ..controller.gcode import parse_line
+from ..controller.plasma import PlasmaController, default_material
+from ..materials import Material, MaterialError, MaterialStore
+from .options import add_dialect_options
+from .plan import DaemonStep, DwellStep, ProgramPlan, Refused, detect_dialect
+
+__all__ = ["CheckReport", "CutReport", "add_arguments", "check_program", "run_from_args"]
+
+
+@dataclass
+class CutReport:
+    line: int
+    text: str
+    sequence: str  # "automatic" (the daemon's start sequence) or "relay" (the program's)
+    material: int | None
+    material_name: str | None
+    pierce_height_mm: float
+    pierce_delay_s: float
+    cut_height_mm: float
+    target_v: float | None  # None: auto voltage, sampled at the start of the cut
+    feed_mm_min: float | None
+    anti_dive_percent: float
+    thc: bool
+
+
+@dataclass
+class CheckReport:
+    dialect: str
+    dialect_reason: str
+    cuts: list[CutReport] = field(default_factory=list)
+    refused: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.refused
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "ok": self.ok,
+            "dialect": self.dialect,
+            "dialect_reason": self.dialect_reason,
+            "cuts": [asdict(cut) for cut in self.cuts],
+            "refused": self.refused,
+            "warnings": self.warnings,
+        }
+
+
+class _Model:
+    """The daemon's controller without a board: what a program's lines change."""
+
+    def __init__(self, plan: ProgramPlan, controller: PlasmaController) -> None:
+        self.plan = plan
+        self.controller = controller
+        self.feed_mm_min: float | None = None
+        self.open_cut: CutReport | None = None
+        self.material_used = False  # an M190 or a magic comment: cuts name their material
+        self.last_z_mm: float | None = None  # the program's last Z move (work coordinates)
+        self._relay_pending: tuple[bool, bool] = (False, False)  # dwell, cut height still to see
+
+    def dwell(self, seconds: float) -> None:
+        """A relay cut's pierce delay is the program's first dwell after its M3."""
+        cut = self.open_cut
+        if cut is not None and cut.sequence == "relay" and self._relay_pending[0]:
+            cut.pierce_delay_s = seconds
+            self._relay_pending = (False, self._relay_pending[1])
+
+    def apply(self, step: DaemonStep, report: CheckReport) -> None:
+        parsed = parse_line(step.line, line_number=step.source_line, dialect=self.plan.dialect)
+        if step.feed_note:
+            feed = float(step.line.split("F")[1])
+            self.feed_mm_min = feed
+            if self.open_cut is not None and self.open_cut.feed_mm_min is None:
+                self.open_cut.feed_mm_min = feed
+            return
+        for command in parsed.commands:
+            if isinstance(command, ProgramZMove):
+                self._z_move(command.z_mm)
+            if isinstance(command, ProgramZMove | ProbeSurface | SetWorkZ):
+                continue  # needs the board
+            if isinstance(command, TorchStart | ProbeAndStart):
+                self._start(step, command, report)
+            elif isinstance(command, TorchStop):
+                if self.open_cut is not None and self.open_cut.feed_mm_min is None:
+                    self.open_cut.feed_mm_min = self.feed_mm_min  # no new feed in the cut
+                self.open_cut = None
+            else:
+                outcome = self.controller.handle(command, 0.0)
+                self.material_used |= isinstance(command, SelectMaterial | DefineMaterial)
+                cut_feed = outcome.data.get("cut_feed")
+                if isinstance(cut_feed, int | float):
+                    self.plan.cut_feed = float(cut_feed)
+
+    def _z_move(self, z_mm: float) -> None:
+        cut = self.open_cut
+        if cut is not None and cut.sequence == "relay" and self._relay_pending[1]:
+            cut.cut_height_mm = z_mm  # a relay cut's first Z move after M3: its cut height
+            self._relay_pending = (self._relay_pending[0], False)
+        self.last_z_mm = z_mm
+
+    def _start(
+        self, step: DaemonStep, command: TorchStart | ProbeAndStart, report: CheckReport
+    ) -> None:
+        sequence = self.controller.sequence
+        params = sequence.params
+        relay = isinstance(command, TorchStart) and (command.relay or not sequence.g200_active)
+        if isinstance(command, ProbeAndStart):
+            if command.mode in (2, 3):
+                self.controller.handle(command, 0.0)
+                return
+            params = replace(
+                params,
+                pierce_height_mm=command.pierce_height_mm,
+                pierce_delay_ms=command.pierce_delay_s * 1000.0,
+                cut_height_mm=command.cut_height_mm,
+            )
+            sequence.set_params(params)
+        elif not relay and not sequence.plasma_mode:
+            tool = "T0 M6" if self.plan.dialect is Dialect.PLASMAC else "T112 M6"
+            raise CommandError("M3", f"not in plasma mode: send {tool} first")
+        if self.open_cut is not None:
+            raise CommandError("M3", f"a cut is already running (from line {self.open_cut.line})")
+        table = self.controller.materials
+        material = table.selected if self.material_used else None
+        cut = CutReport(
+            line=step.source_line,
+            text=step.text,
+            sequence="relay" if relay else "automatic",
+            material=None if material is None else material.number,
+            material_name=None if material is None else material.name,
+            pierce_height_mm=params.pierce_height_mm,
+            pierce_delay_s=params.pierce_delay_ms / 1000.0,
+            cut_height_mm=params.cut_height_mm,
+            target_v=params.cut_voltage_v,
+            feed_mm_min=None,  # the cut's first feed note, else the feed in force
+            anti_dive_percent=params.anti_dive_percent,
+            thc=sequence.thc_enabled,
+        )
+        if relay:
+            # The program's own heights: where Z was at M3, and what follows it.
+            cut.pierce_height_mm = self.last_z_mm if self.last_z_mm is not None else math.nan
+            cut.pierce_delay_s, cut.cut_height_mm = 0.0, cut.pierce_height_mm
+            self._relay_pending = (True, True)
+        report.cuts.append(cut)
+        self.open_cut = cut
+
+
+def check_program(
+    lines: Sequence[str],
+    *,
+    dialect: Dialect | None = None,
+    codes: Mapping[str, str] | None = None,
+    materials: Mapping[int, Material] | None = None,
+    inch_materials: bool = False,
+    default_feed_mm_min: float = 3000.0,
+    plasma_mode_at_start: bool = False,
+) -> CheckReport:
+    """Plan ``lines`` as the sender would and apply them to a board-less controller."""
+    if dialect is None:
+        dialect, why = detect_dialect(lines)
+    else:
+        why = "given"
+    report = CheckReport(str(dialect), why)
+    plan = ProgramPlan(lines, dialect, dict(codes or {}))
+    controller = PlasmaController(
+        materials=materials or {},
+        default=default_material(default_feed_mm_min),
+        inch_materials=inch_materials,
+    )
+    controller.sequence.plasma_mode = plasma_mode_at_start
+    model = _Model(plan, controller)
+    for step in plan.steps():
+        if isinstance(step, Refused):
+            report.refused.append(
+                {"line": step.source_line, "text": step.text, "error": step.error}
+            )
+            continue
+        if isinstance(step, DwellStep):
+            model.dwell(step.seconds)
+        if not isinstance(step, DaemonStep):
+            continue
+        try:
+            model.apply(step, report)
+        except CommandError as exc:
+            report.refused.append({"line": step.source_line, "text": step.text, "error": str(exc)})
+    if model.open_cut is not None:
+        report.warnings.append(f"the cut from line {model.open_cut.line} is never ended (M5)")
+    if plan.z_stripped:
+        report.warnings.append(
+            f"{plan.z_stripped} Z moves stripped (PlasmaC; #<keep-z-motion> = 1 keeps them)"
+        )
+    report.warnings.extend(plan.warnings)
+    return report
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", type=Path, help="the G-code program")
+    parser.add_argument(
+        "--materials", type=Path, default=None, help="a QtPlasmaC material file (NAME.cfg)"
+    )
+    parser.add_argument("--inch-materials", action="store_true", help="its lengths are inches")
+    parser.add_argument(
+        "--plasma-mode-at-start", action="store_true",
+        help="as the daemon configured to start in plasma mode (posts without T112 M6)",
+    )  # fmt: skip
+    add_dialect_options(parser)
+    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+
+
+def _text(report: CheckReport, path: Path) -> str:
+    out = [f"{path}: dialect {report.dialect} ({report.dialect_reason})"]
+    for number, cut in enumerate(report.cuts, start=1):
+        material = (
+            f"material {cut.material} {cut.material_name!r}" if cut.material is not None
+            else "G200/default parameters"
+        )  # fmt: skip
+        volts = "auto voltage" if cut.target_v is None else f"{cut.target_v:g} V"
+        feed = "feed ?" if cut.feed_mm_min is None else f"feed {cut.feed_mm_min:g} mm/min"
+        out.append(
+            f"cut {number} at line {cut.line} ({cut.sequence}): {material}; pierce "
+            f"{cut.pierce_height_mm:g} mm for {cut.pierce_delay_s:g} s; cut height "
+            f"{cut.cut_height_mm:g} mm; {volts}; {feed}; anti-dive {cut.anti_dive_percent:g} %; "
+            f"THC {'on' if cut.thc else 'off'}"
+        )
+    for refused in report.refused:
+        out.append(f"refused line {refused['line']}: {refused['text']!r}: {refused['error']}")
+    out.extend(f"warning: {warning}" for warning in report.warnings)
+    verdict = "OK" if report.ok else f"REFUSED: {len(report.refused)} line(s)"
+    out.append(f"{verdict}: {len(report.cuts)} cut(s)")
+    return "\n".join(out)
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """Exit 0 only when nothing is refused; 2 when the files cannot be read."""
+    try:
+        lines = args.file.read_text(encoding="utf-8", errors="replace").splitlines()
+        materials = MaterialStore(args.materials).load() if args.materials else {}
+    except (OSError, MaterialError) as exc:
+        print(f"dthc-bridge check-program: {exc}")
+        return 2
+    report = check_program(
+        lines, dialect=args.dialect, codes=args.codes, materials=materials,
+        inch_materials=args.inch_materials, plasma_mode_at_start=args.plasma_mode_at_start,
+    )  # fmt: skip
+    print(json.dumps(report.as_dict()) if args.json else _text(report, args.file))
+    return 0 if report.ok else 1

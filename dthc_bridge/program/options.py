@@ -1,0 +1,54 @@
+"""The command-line options every program runner shares (check-program, send, demo)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..controller.dialect import Dialect
+from .plan import parse_code_map
+
+__all__ = ["add_dialect_options"]
+
+
+def _dialect(text: str) -> Dialect:
+    try:
+        return Dialect(text)
+    except ValueError:
+        names = ", ".join(d.value for d in Dialect)
+        raise argparse.ArgumentTypeError(f"{text!r} is not a dialect ({names})") from None
+
+
+class _CodeAction(argparse.Action):
+    """``--code H1=M667`` (repeatable) into one ``{code: line}`` table."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
+        codes = dict(getattr(namespace, self.dest) or {})
+        try:
+            codes.update(parse_code_map([str(values)]))
+        except ValueError as exc:
+            parser.error(f"{option_string}: {exc}")
+        setattr(namespace, self.dest, codes)
+
+
+def add_dialect_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--dialect",
+        type=_dialect,
+        default=None,
+        help=f"the program's dialect ({', '.join(d.value for d in Dialect)}); "
+        "default: detected from the program",
+    )
+    parser.add_argument(
+        "--code",
+        dest="codes",
+        action=_CodeAction,
+        default={},
+        metavar="CODE=LINE",
+        help="map a shop's own code to the daemon's, e.g. H1=M667 (repeatable)",
+    )

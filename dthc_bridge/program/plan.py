@@ -1,0 +1,436 @@
+"""A program file, as the sender runs it: dialect rules, NGC evaluation, Z to the board.
+
+:class:`ProgramPlan` turns the lines of a program into :data:`Step` s, lazily and in order:
+
+* :class:`DaemonStep`: a plain line for the daemon (plasma words, Z moves, probes, the Z
+  origin, materials) or a feed note (``G1 F<mm/min>``: the anti-dive reference);
+* :class:`MotionStep`: a plain line for the XY motion backend (modal-only lines included);
+* :class:`DwellStep`: ``G4 P``, after motion and Z have finished;
+* :class:`Refused`: a line that cannot run, with the reason naming what the user wrote.
+
+Rules, per dialect (:class:`~dthc_bridge.controller.dialect.Dialect`):
+
+* NGC dialects (``plasmac``, ``relay``, ``rosetta``) are evaluated by
+  :mod:`.ngc` first, so downstream only sees plain lines; in ``masso`` text after ``#`` is
+  a comment (an option of the MASSO post).
+* Z belongs to the board: a Z word becomes a daemon line in millimetres, absolute, work
+  coordinates (``G53``: machine); a line mixing XY and Z moves Z first going up and last
+  going down, so the torch never drags. PlasmaC strips Z moves unless
+  ``#<keep-z-motion> = 1``; a probe (``G38.2``) and the Z origin (``G92 Z``) always pass.
+* Units and distance mode (``G20``/``G21``, ``G90``/``G91``) are tracked here: the daemon's
+  Z words and feed notes are always mm and absolute; the motion backend gets the program's
+  own modal lines and keeps its own state.
+* ``#<pierce-only> = 1`` (PlasmaC): each cut pierces, then ``M5`` follows at once and the
+  cut's motion is skipped. ``#<holes>``, ``#<h_diameter>``, ``#<h_velocity>``,
+  ``#<oclength>``, ``#<m_diameter>``, ``#<tube-cut>`` belong to QtPlasmaC's G-code filter,
+  which rewrites hole paths: they are not applied (a warning says so once); the program's
+  own ``M67 E3`` and ``M62 P3`` lines are.
+* ``M66 P3 L3 Q<t>`` (wait for the material change) is satisfied when the daemon has
+  answered the ``M190`` before it: a :class:`DaemonStep` answers only once applied.
+* A shop code table (``H1`` → ``M667``) rewrites words before parsing; the ``relay``
+  dialect starts with FireControl's ``H1``/``H0`` (THC on/off).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+
+from ..controller.commands import (
+    CommandError,
+    ProbeSurface,
+    ProgramZMove,
+    SetWorkZ,
+    TorchStart,
+    TorchStop,
+)
+from ..controller.dialect import Dialect
+from ..controller.gcode import ParsedLine, parse_line
+from ..controller.words import GcodeSyntaxError, Word, tokenize
+from .ngc import EvaluatedLine, NgcError, NgcProgram
+
+__all__ = [
+    "DEFAULT_CODES",
+    "DaemonStep",
+    "DwellStep",
+    "MotionStep",
+    "ProgramPlan",
+    "Refused",
+    "Step",
+    "detect_dialect",
+    "parse_code_map",
+]
+
+MM_PER_INCH = 25.4
+CUT_FEED_PIN = "plasmac.cut-feed-rate"
+
+DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
+    # FireControl-style programs switch their THC with H1 / H0.
+    Dialect.RELAY: {"H1": "M667", "H0": "M666"},
+}
+
+_FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter", "tube-cut")
+
+
+@dataclass(frozen=True, slots=True)
+class DaemonStep:
+    line: str
+    source_line: int
+    text: str  # the program's line as written (evaluated)
+    feed_note: bool = False  # only the anti-dive reference: never waits for motion
+
+
+@dataclass(frozen=True, slots=True)
+class MotionStep:
+    line: str
+    source_line: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class DwellStep:
+    seconds: float
+    source_line: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Refused:
+    source_line: int
+    text: str
+    error: str
+
+
+Step = DaemonStep | MotionStep | DwellStep | Refused
+
+
+def detect_dialect(lines: Sequence[str]) -> tuple[Dialect, str]:
+    """The dialect a program is most likely written in, and why (what was found)."""
+    text = "\n".join(lines)
+    checks: list[tuple[Dialect, str, str]] = [
+        (Dialect.MASSO, r"\bT\s*112\b|\bG\s*200\b|\bM\s*66[67]\b", "T112/G200/M666/M667"),
+        (Dialect.ROSETTA, r"\bG\s*100\s*P", "G100 P"),
+        (Dialect.PLASMAC, r"\$\s*-?[0-2]\b|\bM\s*190\b|\(o=|#<|\bo\s*(?:<|\d)",
+         "$n/M190/(o=)/#<…>/o-words"),
+        (Dialect.RELAY, r"\bG\s*(?:38\.[2-5]|31)\b", "a probe (G38.2/G31) in the program"),
+    ]  # fmt: skip
+    for dialect, pattern, found in checks:
+        if re.search(pattern, text, re.IGNORECASE):
+            return dialect, f"found {found}"
+    return Dialect.PLASMAC, "nothing dialect-specific found: NGC (LinuxCNC) assumed"
+
+
+def parse_code_map(pairs: Sequence[str]) -> dict[str, str]:
+    """``["H1=M667", "H0=M666"]`` → ``{"H1": "M667", "H0": "M666"}``; errors name the pair."""
+    codes: dict[str, str] = {}
+    for pair in pairs:
+        code, sep, target = (part.strip() for part in pair.partition("="))
+        if not sep or re.fullmatch(r"[A-Za-z]-?\d+(?:\.\d+)?", code) is None or not target:
+            raise ValueError(f"{pair!r}: expected CODE=LINE, for example H1=M667")
+        try:
+            tokenize(target)
+        except GcodeSyntaxError as exc:
+            raise ValueError(f"{pair!r}: {exc}") from None
+        codes[_code_key(code[0], float(code[1:]))] = target
+    return codes
+
+
+def _code_key(letter: str, value: float) -> str:
+    return f"{letter.upper()}{value:g}"
+
+
+def _fmt(value: float) -> str:
+    text = f"{value:.4f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _strip_hash_comment(line: str) -> str:
+    """MASSO: ``#`` outside parentheses starts a comment."""
+    depth = 0
+    for i, ch in enumerate(line):
+        if ch == "(":
+            depth += 1
+        elif ch == ")":
+            depth = max(0, depth - 1)
+        elif ch == "#" and depth == 0:
+            return line[:i]
+    return line
+
+
+@dataclass
+class _Modal:
+    units: float = 1.0  # mm per program unit
+    absolute: bool = True
+    motion: int = 0  # 0/1/2/3
+    feed: float | None = None  # program units/min
+    z: float | None = None  # work Z in mm, as last commanded; None: unknown
+    noted_feed_mm_min: float | None = None
+
+
+@dataclass
+class ProgramPlan:
+    """The steps of one program. ``cut_feed`` is read by ``#<_hal[plasmac.cut-feed-rate]>``:
+    the caller sets it from the daemon's answer to ``M190`` before the next step is taken."""
+
+    lines: Sequence[str]
+    dialect: Dialect
+    codes: Mapping[str, str] = field(default_factory=dict)
+    cut_feed: float | None = None
+    warnings: list[str] = field(default_factory=list)
+    z_stripped: int = 0
+
+    def __post_init__(self) -> None:
+        self._codes = {**DEFAULT_CODES.get(self.dialect, {}), **self.codes}
+        self._modal = _Modal()
+        self._ngc: NgcProgram | None = None
+        self._in_cut = False
+        self._pierce_only_skip = False
+        self._warned_filter = False
+
+    # --- program parameters ----------------------------------------------------------------
+
+    def parameter(self, name: str) -> float | None:
+        return None if self._ngc is None else self._ngc.get(name)
+
+    @property
+    def keep_z_motion(self) -> bool:
+        return self.dialect is not Dialect.PLASMAC or bool(self.parameter("keep-z-motion"))
+
+    @property
+    def pierce_only(self) -> bool:
+        return bool(self.parameter("pierce-only"))
+
+    def _hal(self, pin: str) -> float:
+        if pin != CUT_FEED_PIN:
+            raise ValueError(f"HAL pin {pin!r} is not readable here (only {CUT_FEED_PIN})")
+        if self.cut_feed is None:
+            raise ValueError("no material in force yet (M190 P<n> before the feed)")
+        return self.cut_feed
+
+    # --- steps -----------------------------------------------------------------------------
+
+    def _source(self) -> Iterator[EvaluatedLine]:
+        if self.dialect is Dialect.MASSO:
+            for number, line in enumerate(self.lines, start=1):
+                yield EvaluatedLine(number, _strip_hash_comment(line))
+            return
+        self._ngc = NgcProgram(self.lines, hal=self._hal)
+        yield from self._ngc.evaluate()
+
+    def steps(self) -> Iterator[Step]:
+        """Every step in order; a :class:`Refused` for each line that cannot run (after an
+        NGC error the program's flow is unknown, so nothing follows it)."""
+        source = self._source()
+        while True:
+            try:
+                line = next(source)
+            except StopIteration:
+                return
+            except NgcError as exc:
+                yield Refused(exc.line, exc.text, str(exc))
+                return
+            if not line.text.strip():
+                continue
+            try:
+                yield from self._line(line.source_line, line.text)
+            except (CommandError, GcodeSyntaxError, ValueError) as exc:
+                yield Refused(line.source_line, line.text.strip(), str(exc))
+            self._check_filter_params()
+
+    def _check_filter_params(self) -> None:
+        if self._warned_filter or self._ngc is None:
+            return
+        for name in _FILTER_PARAMS:
+            value = self._ngc.get(name)
+            if value:
+                self._warned_filter = True
+                self.warnings.append(
+                    f"#<{name}> = {value:g}: QtPlasmaC's hole handling is not applied here; "
+                    "the program's own M67 E3 and M62 P3 lines are"
+                )
+                return
+
+    def _line(self, number: int, text: str) -> Iterator[Step]:
+        text = self._mapped(text)
+        words = list(tokenize(text).words)
+        here = text.strip()
+        gs = {w.value for w in words if w.letter == "G"}
+        ms = {w.value for w in words if w.letter == "M"}
+        self._track_modal(words)
+
+        if 4.0 in gs:
+            yield from self._dwell(number, here, words)
+            return
+        if 66.0 in ms:
+            self._check_m66(words)
+            return  # the M190 before it was answered once the material was applied
+        probe = gs & {31.0, 38.2, 38.3, 38.4, 38.5}
+        origin = (92.0 in gs or 10.0 in gs) and any(w.letter == "Z" for w in words)
+        if probe or origin or 92.1 in gs:
+            yield from self._board_z_line(number, here, words, bool(probe))
+            return
+        z_word = next((w for w in words if w.letter == "Z"), None)
+        z_step: DaemonStep | None = None
+        going_down = False
+        if z_word is not None:
+            z_step, going_down = self._z_move(number, here, words, z_word)
+            words = [w for w in words if w is not z_word and not _is_g(w, 53.0)]
+            text = _rebuild(text, words)
+        parsed = parse_line(text, line_number=number, dialect=self.dialect)
+        yield from self._split(number, here, text.strip(), parsed, (z_step, going_down))
+
+    def _mapped(self, text: str) -> str:
+        if not self._codes:
+            return text
+        words = tokenize(text).words
+        out, kept = [], 0
+        for word in words:
+            target = self._codes.get(_code_key(word.letter, word.value)) if word.number else None
+            if target is not None:
+                out += [text[kept : word.start], target]
+                kept = word.end
+        return "".join(out) + text[kept:]
+
+    def _track_modal(self, words: Sequence[Word]) -> None:
+        modal = self._modal
+        for w in words:
+            if w.letter == "G":
+                if w.value == 20.0:
+                    modal.units = MM_PER_INCH
+                elif w.value == 21.0:
+                    modal.units = 1.0
+                elif w.value == 90.0:
+                    modal.absolute = True
+                elif w.value == 91.0:
+                    modal.absolute = False
+                elif w.value in (0.0, 1.0, 2.0, 3.0):
+                    modal.motion = int(w.value)
+            elif w.letter == "F" and w.value > 0:
+                modal.feed = w.value
+
+    def _dwell(self, number: int, here: str, words: Sequence[Word]) -> Iterator[Step]:
+        p = next((w for w in words if w.letter == "P"), None)
+        if p is None or p.value < 0:
+            raise CommandError("G4 P", "a dwell needs P >= 0")
+        others = [w for w in words if w.letter not in "GPN"]
+        if others:
+            raise CommandError(f"G4 {others[0].letter}", "put the dwell on its own line")
+        yield DwellStep(p.value * self.dialect.dwell_unit_s, number, here)
+
+    def _check_m66(self, words: Sequence[Word]) -> None:
+        p = next((w for w in words if w.letter == "P"), None)
+        if self.dialect is not Dialect.PLASMAC or p is None or p.value != 3.0:
+            raise CommandError("M66", "only PlasmaC's M66 P3 (wait for the material) is understood")
+
+    def _board_z_line(
+        self, number: int, here: str, words: Sequence[Word], probe: bool
+    ) -> Iterator[Step]:
+        """G38.2/G31 probes and G92/G10 L20 Z origins: to the daemon, in mm."""
+        units = self._modal.units
+        parts: list[str] = []
+        xy = [w for w in words if w.letter in "XYABC"]
+        for w in words:
+            if w.letter in "GLP" or (w.letter == "Z"):
+                scale = units if w.letter == "Z" else 1.0
+                parts.append(f"{w.letter}{_fmt(w.value * scale)}")
+            elif w.letter == "F" and probe:
+                parts.append(f"F{_fmt(w.value * units)}")
+        self._modal.z = None  # where a probe stops, or what an origin makes Z read
+        yield DaemonStep(" ".join(parts), number, here)
+        if any(_is_g(w, 92.1) for w in words):
+            yield MotionStep("G92.1", number, here)  # the XY offsets go too
+        if xy and not probe:
+            g = next(w for w in words if w.letter == "G")
+            rest = [g, *[w for w in words if w.letter in "LP"], *xy]
+            yield MotionStep(" ".join(f"{w.letter}{w.number}" for w in rest), number, here)
+
+    def _z_move(
+        self, number: int, here: str, words: Sequence[Word], z: Word
+    ) -> tuple[DaemonStep | None, bool]:
+        """The daemon's Z line, and whether it goes down (then it runs after the XY move;
+        from an unknown height a move counts as going up: Z first)."""
+        modal = self._modal
+        machine = any(_is_g(w, 53.0) for w in words)
+        if modal.motion in (2, 3):
+            raise CommandError(f"Z{z.number}", "Z belongs to the board: no helical arcs")
+        value = z.value * modal.units
+        if not modal.absolute and not machine:
+            if modal.z is None:
+                raise CommandError(f"Z{z.number}", "incremental Z (G91) from an unknown height")
+            value += modal.z
+        if not self.keep_z_motion:
+            self.z_stripped += 1
+            return None, False
+        previous = modal.z
+        modal.z = None if machine else value
+        going_down = previous is not None and modal.z is not None and modal.z < previous
+        if modal.motion == 1:
+            if modal.feed is None:
+                raise CommandError("G1 Z", "no feed programmed (F)")
+            line = f"G1 Z{_fmt(value)} F{_fmt(modal.feed * modal.units)}"
+        else:
+            line = f"{'G53 ' if machine else ''}G0 Z{_fmt(value)}"
+        return DaemonStep(line, number, here), going_down
+
+    def _split(
+        self,
+        number: int,
+        here: str,
+        text: str,
+        parsed: ParsedLine,
+        z: tuple[DaemonStep | None, bool],
+    ) -> Iterator[Step]:
+        z_step, going_down = z
+        commands = parsed.commands
+        plasma = [c for c in commands if not isinstance(c, ProgramZMove | ProbeSurface | SetWorkZ)]
+        motion = parsed.motion
+        if self._pierce_only_skip and not plasma:
+            return  # the cut of a pierce-only program: its motion is skipped
+        if z_step is not None and not going_down:
+            yield z_step
+        if plasma:
+            yield from self._plasma(number, here, text, parsed)
+        if motion is not None:
+            yield MotionStep(motion, number, here)
+            note = self._feed_note(motion)
+            if note is not None:
+                yield DaemonStep(note, number, here, feed_note=True)
+        if z_step is not None and going_down:
+            yield z_step
+
+    def _plasma(self, number: int, here: str, text: str, parsed: ParsedLine) -> Iterator[Step]:
+        starts = any(isinstance(c, TorchStart) for c in parsed.commands)
+        stops = any(isinstance(c, TorchStop) for c in parsed.commands)
+        if stops and self._pierce_only_skip:
+            self._pierce_only_skip = False
+            return  # its M5 was sent right after the pierce
+        yield DaemonStep(text, number, here)
+        if starts or stops:
+            self._modal.z = None  # the daemon moves Z in its sequence
+        if starts and self.pierce_only and self.dialect is Dialect.PLASMAC:
+            yield DaemonStep("M5 $0", number, "(pierce only) M5 $0")
+            self._pierce_only_skip = True
+
+    def _feed_note(self, motion: str) -> str | None:
+        """``G1 F<mm/min>`` for the daemon when the programmed cutting feed changes."""
+        modal = self._modal
+        words = tokenize(motion).words
+        if modal.motion not in (1, 2, 3) or modal.feed is None:
+            return None
+        if not any(w.letter in "XYIJ" for w in words):
+            return None  # a Z-only feed (G1 Z1.5 F600) is not the cutting feed
+        feed_mm_min = modal.feed * modal.units
+        if feed_mm_min == modal.noted_feed_mm_min:
+            return None
+        modal.noted_feed_mm_min = feed_mm_min
+        return f"G1 F{_fmt(feed_mm_min)}"
+
+
+def _is_g(word: Word, value: float) -> bool:
+    return word.letter == "G" and word.value == value
+
+
+def _rebuild(text: str, words: Sequence[Word]) -> str:
+    """The line with only ``words`` (comments dropped: they stay in the step's ``text``)."""
+    return " ".join(text[w.start : w.end] for w in words)

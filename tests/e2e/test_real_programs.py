@@ -1,0 +1,99 @@
+"""Programs in the forms real posts write, end to end: one per dialect through the stack.
+
+mosquitto, the daemon and the mock as their own processes, the reference sender; the
+programs are in tests/programs (written for these tests in the forms of
+../shared/reference/real-programs.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+from pathlib import Path
+
+import pytest
+
+from dthc_bridge.controller.dialect import Dialect
+from dthc_tools.demo import Stack, StackOptions, program_lines
+from dthc_tools.demo.summary import summarize
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
+
+PROGRAMS = Path(__file__).parents[1] / "programs"
+
+
+def assert_clean(summary: dict[str, object], cuts: int, rms_mm: float) -> None:
+    assert summary["errors"] == [], summary["errors"]
+    assert summary["safety_violations"] == 0
+    assert summary["pierces"] == cuts
+    assert summary["completed_cuts"] == cuts
+    assert isinstance(summary["height_rms_mm"], float)
+    assert summary["height_rms_mm"] < rms_mm
+    assert summary["torch_on_at_exit"] is False
+
+
+async def test_plasmac_program_with_a_material_change_and_a_hole_over_cut(
+    tmp_path: Path,
+) -> None:
+    """M190 from the daemon's library, its feed through F#<_hal[...]>, then a magic-comment
+    material; the hole ends with the torch disabled (M62 P3) while motion goes on."""
+    materials = tmp_path / "materials.cfg"
+    shutil.copyfile(PROGRAMS / "shop_material.cfg", materials)
+    options = StackOptions(tmp_path, broker="mosquitto", materials_file=materials)
+    async with Stack(options) as stack:
+        lines = program_lines(str(PROGRAMS / "plasmac_material_overcut.ngc"))
+        report = await stack.send(lines)
+        result = await stack.finish(report)
+    summary = summarize(result, options.telemetry_hz)
+    assert report.dialect == "plasmac"
+    assert_clean(summary, 2, 0.2)
+    cuts = summary["cuts"]
+    assert isinstance(cuts, list)
+    # The first cut ran at the library material's feed (3000 mm/min): 600 mm in ~12 s.
+    assert 11.5 < cuts[0]["arc_on_s"] < 14.0
+    # The hole's over-cut ran with the torch off: the arc went out before the path ended.
+    assert cuts[1]["arc_on_s"] < 4.0
+
+
+async def test_relay_program_probes_and_moves_z_itself(tmp_path: Path) -> None:
+    """grbl-style: G38.2 by the board, G92 Z, its own Z moves and dwell, M3 a bare relay,
+    FireControl's H1/H0 switching the THC."""
+    options = StackOptions(tmp_path, broker="mosquitto")
+    async with Stack(options) as stack:
+        report = await stack.send(program_lines(str(PROGRAMS / "relay_self_probe.nc")))
+        result = await stack.finish(report)
+    summary = summarize(result, options.telemetry_hz)
+    assert report.dialect == "relay"
+    assert_clean(summary, 1, 0.1)
+    cuts = summary["cuts"]
+    assert isinstance(cuts, list)
+    assert cuts[0]["thc_active_s"] > 1.0  # H1 switched the THC on
+
+
+async def test_masso_program_stops_after_pierce_midway_and_goes_on_at_cycle_start(
+    tmp_path: Path,
+) -> None:
+    """A G200 change to S1 mid-program: the second M3 waits at the pierce, raised, until
+    the operator's cycle start; then the cut runs."""
+    options = StackOptions(tmp_path, scenario="flat_clean", broker="mosquitto")
+    async with Stack(options) as stack:
+        lines = program_lines(str(PROGRAMS / "masso_s1_midway.nc"))
+        sending = asyncio.create_task(stack.send(lines, dialect=Dialect.MASSO))
+        async with asyncio.timeout(60):
+            while not any(e.get("cause") == "stop_after_pierce" for e in stack.events):
+                assert not sending.done(), sending.result()
+                await asyncio.sleep(0.05)
+        await asyncio.sleep(0.5)
+        assert not sending.done()  # the sender waits for the operator
+        await stack.request("cycle_start")
+        report = await sending
+        result = await stack.finish(report)
+    summary = summarize(result, options.telemetry_hz)
+    assert report.ok, report.error
+    assert summary["errors"] == [], summary["errors"]
+    assert summary["safety_violations"] == 0
+    # The S1 cut lit twice (its pierce, then the relight after cycle start): the mock's
+    # truth counts each arc-on span as a cut.
+    assert summary["pierces"] == 3
+    assert summary["completed_cuts"] == 3
+    assert summary["torch_on_at_exit"] is False
