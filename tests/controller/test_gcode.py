@@ -45,8 +45,8 @@ VENDORED_SAMPLE = (
 )
 
 
-def commands(line: str, **kwargs: int | None) -> tuple[Command, ...]:
-    return parse_line(line, **kwargs).commands
+def commands(line: str, line_number: int | None = None) -> tuple[Command, ...]:
+    return parse_line(line, line_number=line_number).commands
 
 
 def error(line: str) -> CommandError:
@@ -460,7 +460,7 @@ def test_plasmac_errors_name_the_word(line: str, word: str, reason: str) -> None
         ("X5 G200 F150", "G200 X", "unknown parameter"),
         ("M3 P1000", "M3 P", "unknown parameter"),
         ("M666 F500", "M666 F", "unknown parameter"),
-        ("T112 M6 F5", "M6 F", "unknown parameter"),
+        ("T112 M6 P5", "M6 P", "unknown parameter"),
         ("G200 F", "G200 F", "missing value"),
         ("G200 F P5", "G200 F", "missing value"),
         ("G200 Fabc", "G200 F", "missing value"),

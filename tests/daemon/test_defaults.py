@@ -90,6 +90,11 @@ SECTIONS = {
         config_only={
             "mode": "CutSequence.mode, not a SequenceConfig field (checked below)",
             "thc": "the [controller.thc] section (its own entry)",
+            "dialect": "the ControllerService's default dialect, not the sequence's",
+            "plasma_mode_at_start": "CutSequence.plasma_mode at start (daemon.build_service)",
+            "materials_file": "the MaterialStore the service writes",
+            "materials_in_inches": "PlasmaController.inch_materials",
+            "default_cut_feed_mm_min": "PlasmaController.default_material (material 0)",
         },
         overrides={},
     ),

@@ -81,7 +81,7 @@ async def test_controller_events_are_published_in_order_at_qos_1_not_retained(
         await probe.wait_count(f"{root}/event", 2)
     assert probe.json_on(f"{root}/event") == [
         {"type": "arc_lost", "reason": "arc lost", "t": 1.5},
-        {"type": "pause", "reason": "breakaway", "t": 2.0},
+        {"type": "pause", "reason": "breakaway", "cause": "fault", "t": 2.0},
     ]
     assert all(m.qos == 1 and not m.retain for m in probe.on(f"{root}/event"))
 

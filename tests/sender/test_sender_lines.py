@@ -89,7 +89,7 @@ async def test_modal_only_lines_reach_the_motion_backend(line: str) -> None:
 
 
 async def test_an_incremental_program_runs_incremental() -> None:
-    daemon, backend = await _send(["G91", "G0 X10", "G0 X10"])
+    _daemon, backend = await _send(["G91", "G0 X10", "G0 X10"])
     assert backend.queued == ["G91", "G0 X10", "G0 X10"]
 
 
@@ -125,12 +125,12 @@ async def test_inch_programs_reach_the_daemon_in_millimetres() -> None:
 
 
 async def test_a_tool_change_passes_its_feed_to_motion() -> None:
-    daemon, backend = await _send(["M06 T1 F5840"])
+    _daemon, backend = await _send(["M06 T1 F5840"])
     assert backend.queued == ["F5840"]
 
 
 async def test_masso_hash_is_a_comment_and_g4_is_milliseconds() -> None:
-    daemon, backend = await _send(["G0 X1 # rapid to start", "G4 P250"])
+    _daemon, backend = await _send(["G0 X1 # rapid to start", "G4 P250"])
     assert backend.queued == ["G0 X1"]
 
 
