@@ -114,7 +114,9 @@ class PlasmaController:
         self.sequence.work_origin_mm = None
         return {"material": selected}
 
-    def _use_material(self, material: Material, word: str) -> dict[str, Any]:
+    def _material_params(self, material: Material, word: str) -> CutParams:
+        """The cut parameters ``material`` would put in force; refused during a cut or
+        when the material is outside the controller's ranges. Changes nothing."""
         sequence = self.sequence
         if sequence.busy:
             raise CommandError(word, f"not during a cut ({sequence.state})")
@@ -128,7 +130,14 @@ class PlasmaController:
             )
         except MaterialError as exc:
             raise CommandError(word, str(exc)) from None
-        sequence.set_params(replace(params, stop_after_pierce=current.stop_after_pierce))
+        return replace(params, stop_after_pierce=current.stop_after_pierce)
+
+    def _use_material(
+        self, material: Material, word: str, params: CutParams | None = None
+    ) -> dict[str, Any]:
+        """Put ``material`` in force (``params``: already checked by _material_params)."""
+        sequence = self.sequence
+        sequence.set_params(params or self._material_params(material, word))
         sequence.set_thc(material.thc)
         sequence.config = replace(
             sequence.config,
@@ -238,16 +247,14 @@ class PlasmaController:
             raise CommandError(word, str(exc)) from None
         if magic is None:
             raise CommandError(word, "not a material comment (o=0, o=1 or o=2)")
-        if magic.option == 0:
-            # A temporary material is used at once: check it can be before it is defined.
-            probe = replace(magic.material, number=0)
-            self._use_material(probe, word)
+        # A temporary material is used at once: check it can be before it is defined.
+        params = self._material_params(magic.material, word) if magic.option == 0 else None
         try:
             material = self.materials.apply(magic)
         except MaterialError as exc:
             raise CommandError(word, str(exc)) from None
-        if magic.option == 0:
-            data = self._use_material(material, word)
+        if params is not None:
+            data = self._use_material(material, word, params)
             return Outcome(data={**data, "defined": material.number})
         return Outcome(
             data={"defined": material.number, "name": material.name},
@@ -289,6 +296,15 @@ class PlasmaController:
     def _probe_and_start(
         self, p6: ProbeAndStart, now: float, xy_mm: tuple[float, float] | None
     ) -> Outcome:
+        if not self.prepare_probe_and_start(p6):
+            return Outcome(data={"mode": p6.mode})
+        self.sequence.start(now, xy_mm)
+        return Outcome(deferred=True)
+
+    def prepare_probe_and_start(self, p6: ProbeAndStart) -> bool:
+        """Everything ``G100 P6`` sets before its start sequence; False for the special
+        modes I2/I3, which only (re)set the values and start nothing. The preflight
+        (:mod:`dthc_bridge.program.check`) records the cut here instead of starting it."""
         sequence = self.sequence
         params = replace(
             sequence.params,
@@ -297,14 +313,12 @@ class PlasmaController:
             pierce_delay_ms=p6.pierce_delay_s * 1000.0,
             cut_height_mm=p6.cut_height_mm,
         )
-        if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
-            sequence.set_params(params)
-            return Outcome(data={"mode": p6.mode})
         sequence.set_params(params)
+        if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
+            return False
         sequence.config = replace(sequence.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
         # RosettaCNC has no T112 M6: P6 itself says the plasma tool is active.
         sequence.plasma_mode = True
         # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
         sequence.set_thc(False)
-        sequence.start(now, xy_mm)
-        return Outcome(deferred=True)
+        return True

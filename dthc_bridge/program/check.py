@@ -14,7 +14,7 @@ import argparse
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +32,7 @@ from ..controller.commands import (
 from ..controller.dialect import Dialect
 from ..controller.gcode import parse_line
 from ..controller.plasma import PlasmaController, default_material
+from ..controller.words import cutting_feed_mm_min
 from ..materials import Material, MaterialError, MaterialStore
 from .options import add_dialect_options
 from .plan import DaemonStep, DwellStep, ProgramPlan, Refused, detect_dialect
@@ -67,6 +68,9 @@ class CheckReport:
     def ok(self) -> bool:
         return not self.refused
 
+    def refuse(self, line: int, text: str, error: str) -> None:
+        self.refused.append({"line": line, "text": text, "error": error})
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "ok": self.ok,
@@ -100,7 +104,7 @@ class _Model:
     def apply(self, step: DaemonStep, report: CheckReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=self.plan.dialect)
         if step.feed_note:
-            feed = float(step.line.split("F")[1])
+            feed = cutting_feed_mm_min(step.line)
             self.feed_mm_min = feed
             if self.open_cut is not None and self.open_cut.feed_mm_min is None:
                 self.open_cut.feed_mm_min = feed
@@ -137,16 +141,9 @@ class _Model:
         params = sequence.params
         relay = isinstance(command, TorchStart) and (command.relay or not sequence.g200_active)
         if isinstance(command, ProbeAndStart):
-            if command.mode in (2, 3):
-                self.controller.handle(command, 0.0)
+            if not self.controller.prepare_probe_and_start(command):
                 return
-            params = replace(
-                params,
-                pierce_height_mm=command.pierce_height_mm,
-                pierce_delay_ms=command.pierce_delay_s * 1000.0,
-                cut_height_mm=command.cut_height_mm,
-            )
-            sequence.set_params(params)
+            params = sequence.params
         elif not relay and not sequence.plasma_mode:
             tool = "T0 M6" if self.plan.dialect is Dialect.PLASMAC else "T112 M6"
             raise CommandError("M3", f"not in plasma mode: send {tool} first")
@@ -203,9 +200,7 @@ def check_program(
     model = _Model(plan, controller)
     for step in plan.steps():
         if isinstance(step, Refused):
-            report.refused.append(
-                {"line": step.source_line, "text": step.text, "error": step.error}
-            )
+            report.refuse(step.source_line, step.text, step.error)
             continue
         if isinstance(step, DwellStep):
             model.dwell(step.seconds)
@@ -214,7 +209,7 @@ def check_program(
         try:
             model.apply(step, report)
         except CommandError as exc:
-            report.refused.append({"line": step.source_line, "text": step.text, "error": str(exc)})
+            report.refuse(step.source_line, step.text, str(exc))
     if model.open_cut is not None:
         report.warnings.append(f"the cut from line {model.open_cut.line} is never ended (M5)")
     if plan.z_stripped:

@@ -372,16 +372,21 @@ class _Parser:
                 return at + 1
         return None
 
+    def angle_name(self, start: int) -> str:
+        """The ``<name>`` at the cursor, blanks removed (LinuxCNC ignores them); past it."""
+        close = self.s.find(">", self.i)
+        if close < 0:
+            raise self.error(start, None, "'<' is never closed")
+        raw = "".join(self.s[self.i + 1 : close].split())
+        self.i = close + 1
+        return raw
+
     def param(self) -> _Param:
         start = self.i
         self.i += 1
         c = self.peek()
         if c == "<":
-            close = self.s.find(">", self.i)
-            if close < 0:
-                raise self.error(start, None, "'<' is never closed")
-            raw = "".join(self.s[self.i + 1 : close].split())
-            self.i = close + 1
+            raw = self.angle_name(start)
             if not raw:
                 raise self.error(start, self.i, "empty parameter name")
             return _Param(self.s[start : self.i], name=raw.lower(), raw=raw)
@@ -439,11 +444,7 @@ class _Parser:
         self.i += 1
         c = self.peek()
         if c == "<":
-            close = self.s.find(">", self.i)
-            if close < 0:
-                raise self.error(start, None, "'<' is never closed")
-            label = "<" + "".join(self.s[self.i + 1 : close].split()).lower() + ">"
-            self.i = close + 1
+            label = "<" + self.angle_name(start).lower() + ">"
         elif digits := _DIGITS.match(self.s, self.i):
             label = str(int(digits.group()))
             self.i = digits.end()

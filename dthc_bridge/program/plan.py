@@ -49,6 +49,7 @@ from ..controller.dialect import Dialect
 from ..controller.gcode import ParsedLine, parse_line
 from ..controller.words import GcodeSyntaxError, Word, tokenize
 from .ngc import EvaluatedLine, NgcError, NgcProgram
+from .ngc import format_number as _fmt
 
 __all__ = [
     "DEFAULT_CODES",
@@ -138,11 +139,6 @@ def parse_code_map(pairs: Sequence[str]) -> dict[str, str]:
 
 def _code_key(letter: str, value: float) -> str:
     return f"{letter.upper()}{value:g}"
-
-
-def _fmt(value: float) -> str:
-    text = f"{value:.4f}".rstrip("0").rstrip(".")
-    return "0" if text in ("-0", "") else text
 
 
 def _strip_hash_comment(line: str) -> str:
