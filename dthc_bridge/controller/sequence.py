@@ -107,6 +107,7 @@ class _Cut:
     ohmic_failed: int = 0
     relay: bool = False  # the program does the start sequence; M3 is the torch relay
     z_warned: bool = False  # a program Z move was ignored during this cut (warned once)
+    torch_out: bool = False  # put out by a torch disable (over-cut): stays out until M5
 
 
 class CutSequence:
@@ -406,10 +407,11 @@ class CutSequence:
         Enabling never relights a cut: it counts from the next M3 (a disabled M3 runs the
         sequence without firing the torch, as PlasmaC's torch-disabled mode)."""
         self.torch_enabled = enabled
-        if not enabled and self.state in (
+        if not enabled and self.cut is not None and self.state in (
             State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
             State.CUTTING,
         ):  # fmt: skip
+            self.cut.torch_out = True
             self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0))
 
     # --- events from the board -------------------------------------------------------------
@@ -466,6 +468,8 @@ class CutSequence:
     def _arc_ok(self) -> bool:
         if self.config.dry_run or not self.torch_enabled:
             return True
+        if self.cut is not None and self.cut.torch_out:
+            return True  # put out on purpose (over-cut): no arc is no arc loss
         if self.mode is ThcMode.VOLTAGE_ONLY:
             return self._voltage_arc_ok()
         return bool(self._debounced & InputMask.ARC_OK)
@@ -651,7 +655,7 @@ class CutSequence:
         # has had time to drift away from the height that was just probed.
         arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
         delay_done = now - arc_ok_since >= cfg.thc_delay_s
-        arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled
+        arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled or cut.torch_out
         self.thc.frozen = self.thc.target_v is None or arc_lost_running
         if delay_done and settled and self.thc.target_v is None:
             self.thc.filter(volts, period_s, now)
