@@ -15,9 +15,15 @@ Dialects understood:
 * RosettaCNC ``G100 P<n>``: P0 resume point, P4 current, P5 voltage mode, P6 probe and
   start, P7 THC comparator on/off. P1, P2, P3, P8 and P1000 are machine functions, not
   plasma ones, and are refused.
-* LinuxCNC PlasmaC: ``M62``/``M64 P2`` THC off, ``M63``/``M65 P2`` THC on (62/63 with the
-  next motion, 64/65 at once); ``M67``/``M68 E3 Q<n>`` velocity reduction to n percent
-  (67 with the next motion, 68 at once).
+* LinuxCNC PlasmaC: ``M62``/``M64 P2`` THC off, ``M63``/``M65 P2`` THC on, ``P3`` torch
+  disable/enable (hole over-cut; 62/63 with the next motion, 64/65 at once);
+  ``M67``/``M68 E3 Q<n>`` velocity reduction to n percent (67 with the next motion, 68 at
+  once); ``M3 $0 S1``/``M5 $0``/``M5 $-1`` (``$1`` scribe and ``$2`` spotting are refused by
+  name); in the ``plasmac`` dialect ``T0 M6`` is the torch and ``(o=...)`` comments define
+  materials; ``M190 P<n>`` selects a material.
+* Z belongs to the board (all dialects): ``G38.2``/``G38.3``/``G31 Z F`` probe, ``G92 Z``,
+  ``G10 L20 Z`` and ``G92.1`` set the work Z origin, ``G0``/``G1``/``G53 Z`` move Z. In the
+  ``relay`` dialect ``M3`` is a bare torch relay.
 
 Choices made where the source documents are silent or ambiguous:
 
@@ -49,8 +55,8 @@ Choices made where the source documents are silent or ambiguous:
   sender's own position in its file, unique by construction) when given, else the line's N
   word. :attr:`ParsedLine.line_number` is the N word when present, else the argument.
 * ``M67``/``M68``: Q must be 0..100; the value is passed through (PlasmaC reads <= 0 as 100 %).
-  ``M62``-``M65`` with P1 (arc-OK ignore), P3 (torch disable) or any other output than P2
-  are refused, as is ``M67``/``M68`` with any E but 3.
+  ``M62``-``M65`` with P0/P1 (digital output, arc-OK ignore) or any output but P2/P3 are
+  refused, as is ``M67``/``M68`` with any E but 3.
 * Requests: ``torch_up``/``torch_down`` take an optional ``volts`` step (default 1 V, > 0 and
   <= :data:`MAX_VOLTAGE_STEP_V`); ``velocity_reduction`` is immediate (``synchronized=False``);
   the envelope keys ``transaction`` and ``deadline_ms`` are ignored, any other unknown key is
