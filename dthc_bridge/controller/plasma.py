@@ -105,14 +105,25 @@ class PlasmaController:
 
     def begin_program(self) -> dict[str, Any]:
         """A program starts: its ``M190 P-1`` returns to the material in force now, and the
-        temporary materials of an earlier program are gone (QtPlasmaC drops them on load)."""
+        temporary materials of an earlier program are gone (QtPlasmaC drops them on load).
+        The answer carries that material's cut feed: PlasmaC's ``cut-feed-rate`` pin always
+        reads the material in force, even before the program's first ``M190``."""
         table = self.materials
         selected = table.selected_number if not table.selected.temporary else 0
         library = {n: m for n, m in table.materials.items() if not m.temporary}
         self.materials = MaterialTable(library, self.default_material, initial=selected)
         self.sequence.torch_enabled = True
         self.sequence.work_origin_mm = None
-        return {"material": selected}
+        material = self.materials.selected
+        return {
+            "material": selected,
+            "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
+        }
+
+    def _in_inches(self, material: Material) -> bool:
+        """Library and program materials are in the machine's units; material 0 is the
+        daemon's own default, always mm."""
+        return self.inch_materials and material.number != 0
 
     def _material_params(self, material: Material, word: str) -> CutParams:
         """The cut parameters ``material`` would put in force; refused during a cut or
@@ -126,7 +137,7 @@ class PlasmaController:
                 touch_feed_mm_min=current.touch_feed_mm_min,
                 ohmic=current.ohmic,
                 anti_dive_percent=current.anti_dive_percent,
-                inch=self.inch_materials,
+                inch=self._in_inches(material),
             )
         except MaterialError as exc:
             raise CommandError(word, str(exc)) from None
@@ -151,7 +162,7 @@ class PlasmaController:
         return {
             "material": material.number,
             "name": material.name,
-            "cut_feed": material.cut_speed,
+            "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
             "params": material_to_dict(material),
         }
 

@@ -134,6 +134,10 @@ class Material:
         """A program-defined material (``o=0``): never written to the library file."""
         return self.number >= TEMPORARY_BASE
 
+    def cut_speed_mm_min(self, *, inch: bool = False) -> float:
+        """The cut feed in mm/min (``CUT_SPEED`` is in the machine's units per minute)."""
+        return self.cut_speed * (MM_PER_INCH if inch else 1.0)
+
     def as_cut_params(
         self,
         *,

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ from ..controller.commands import (
     ProbeSurface,
     ProgramZMove,
     SelectMaterial,
+    SetCutParams,
     SetWorkZ,
     TorchStart,
     TorchStop,
@@ -45,15 +45,16 @@ class CutReport:
     line: int
     text: str
     sequence: str  # "automatic" (the daemon's start sequence) or "relay" (the program's)
+    parameters: str  # where the heights come from: material, G200, G100 P6, default, program
     material: int | None
     material_name: str | None
-    pierce_height_mm: float
+    pierce_height_mm: float | None  # None: a relay cut started with no Z move known
     pierce_delay_s: float
-    cut_height_mm: float
+    cut_height_mm: float | None
     target_v: float | None  # None: auto voltage, sampled at the start of the cut
     feed_mm_min: float | None
     anti_dive_percent: float
-    thc: bool
+    thc: bool  # on at the start, or switched on during the cut (M667, H1, M65 P2)
 
 
 @dataclass
@@ -91,6 +92,7 @@ class _Model:
         self.feed_mm_min: float | None = None
         self.open_cut: CutReport | None = None
         self.material_used = False  # an M190 or a magic comment: cuts name their material
+        self.g200_seen = False  # a G200 line: its parameters, not the daemon's default
         self.last_z_mm: float | None = None  # the program's last Z move (work coordinates)
         self._relay_pending: tuple[bool, bool] = (False, False)  # dwell, cut height still to see
 
@@ -122,10 +124,14 @@ class _Model:
                 self.open_cut = None
             else:
                 outcome = self.controller.handle(command, 0.0)
-                self.material_used |= isinstance(command, SelectMaterial | DefineMaterial)
-                cut_feed = outcome.data.get("cut_feed")
+                self.g200_seen |= isinstance(command, SetCutParams)
+                if isinstance(command, SetCutParams | SelectMaterial | DefineMaterial):
+                    self.material_used = isinstance(command, SelectMaterial | DefineMaterial)
+                if self.open_cut is not None and self.controller.sequence.thc_enabled:
+                    self.open_cut.thc = True
+                cut_feed = outcome.data.get("cut_feed_mm_min")
                 if isinstance(cut_feed, int | float):
-                    self.plan.cut_feed = float(cut_feed)
+                    self.plan.cut_feed_mm_min = float(cut_feed)
 
     def _z_move(self, z_mm: float) -> None:
         cut = self.open_cut
@@ -146,15 +152,28 @@ class _Model:
             params = sequence.params
         elif not relay and not sequence.plasma_mode:
             tool = "T0 M6" if self.plan.dialect is Dialect.PLASMAC else "T112 M6"
-            raise CommandError("M3", f"not in plasma mode: send {tool} first")
+            raise CommandError(
+                "M3",
+                f"not in plasma mode: the program needs {tool} before it, or the daemon "
+                "configured to start in plasma mode (--plasma-mode-at-start)",
+            )
         if self.open_cut is not None:
             raise CommandError("M3", f"a cut is already running (from line {self.open_cut.line})")
         table = self.controller.materials
         material = table.selected if self.material_used else None
+        if relay:
+            source = "program"
+        elif material is not None:
+            source = "material"
+        elif isinstance(command, ProbeAndStart):
+            source = "G100 P6"
+        else:
+            source = "G200" if self.g200_seen else "default"
         cut = CutReport(
             line=step.source_line,
             text=step.text,
             sequence="relay" if relay else "automatic",
+            parameters=source,
             material=None if material is None else material.number,
             material_name=None if material is None else material.name,
             pierce_height_mm=params.pierce_height_mm,
@@ -167,11 +186,17 @@ class _Model:
         )
         if relay:
             # The program's own heights: where Z was at M3, and what follows it.
-            cut.pierce_height_mm = self.last_z_mm if self.last_z_mm is not None else math.nan
+            cut.pierce_height_mm = self.last_z_mm
             cut.pierce_delay_s, cut.cut_height_mm = 0.0, cut.pierce_height_mm
             self._relay_pending = (True, True)
         report.cuts.append(cut)
         self.open_cut = cut
+
+
+_STARTS = {
+    Dialect.MASSO: "M3", Dialect.PLASMAC: "M3 $0", Dialect.RELAY: "M3",
+    Dialect.ROSETTA: "G100 P6 or M3",
+}  # fmt: skip
 
 
 def check_program(
@@ -197,6 +222,7 @@ def check_program(
         inch_materials=inch_materials,
     )
     controller.sequence.plasma_mode = plasma_mode_at_start
+    plan.cut_feed_mm_min = controller.begin_program()["cut_feed_mm_min"]
     model = _Model(plan, controller)
     for step in plan.steps():
         if isinstance(step, Refused):
@@ -210,6 +236,11 @@ def check_program(
             model.apply(step, report)
         except CommandError as exc:
             report.refuse(step.source_line, step.text, str(exc))
+    if not report.cuts and not report.refused:
+        report.warnings.append(
+            f"no cut found: no torch start ({_STARTS[Dialect(report.dialect)]}) in the "
+            "program; if it uses its own codes, map them with --code (e.g. M10=M3)"
+        )
     if model.open_cut is not None:
         report.warnings.append(f"the cut from line {model.open_cut.line} is never ended (M5)")
     if plan.z_stripped:
@@ -240,17 +271,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _text(report: CheckReport, path: Path) -> str:
     out = [f"{path}: dialect {report.dialect} ({report.dialect_reason})"]
     for number, cut in enumerate(report.cuts, start=1):
-        material = (
-            f"material {cut.material} {cut.material_name!r}" if cut.material is not None
-            else "G200/default parameters"
-        )  # fmt: skip
+        source = {
+            "material": f"material {cut.material} {cut.material_name!r}",
+            "program": "the program's own heights",
+        }.get(cut.parameters, f"{cut.parameters} parameters")
         volts = "auto voltage" if cut.target_v is None else f"{cut.target_v:g} V"
         feed = "feed ?" if cut.feed_mm_min is None else f"feed {cut.feed_mm_min:g} mm/min"
+        pierce = "?" if cut.pierce_height_mm is None else f"{cut.pierce_height_mm:g}"
+        cut_height = "?" if cut.cut_height_mm is None else f"{cut.cut_height_mm:g}"
         out.append(
-            f"cut {number} at line {cut.line} ({cut.sequence}): {material}; pierce "
-            f"{cut.pierce_height_mm:g} mm for {cut.pierce_delay_s:g} s; cut height "
-            f"{cut.cut_height_mm:g} mm; {volts}; {feed}; anti-dive {cut.anti_dive_percent:g} %; "
-            f"THC {'on' if cut.thc else 'off'}"
+            f"cut {number} at line {cut.line} ({cut.sequence}): {source}; pierce "
+            f"{pierce} mm for {cut.pierce_delay_s:g} s; cut height {cut_height} mm; {volts}; "
+            f"{feed}; anti-dive {cut.anti_dive_percent:g} %; THC {'on' if cut.thc else 'off'}"
         )
     for refused in report.refused:
         out.append(f"refused line {refused['line']}: {refused['text']!r}: {refused['error']}")

@@ -721,19 +721,22 @@ class NgcProgram:
             if flow.kind != "stop":  # break/continue/return were matched up when built
                 raise AssertionError(f"unmatched {flow.kind}") from flow
 
-    def get(self, name: str) -> float | None:
+    def get(self, name: str, *, top_level: bool = False) -> float | None:
         """Current value of a parameter: ``get("keep-z-motion")``, ``get("_x_offset")``,
         ``get("1")``; case- and space-insensitive, ``#<...>`` optional; None when unset.
 
-        Locals are those of the call level being run (the top level once a run has ended).
+        Locals are those of the call level being run (the top level once a run has ended),
+        or of the top level with ``top_level``: program settings such as
+        ``#<keep-z-motion>`` are set there and hold inside subroutines too.
         """
         key = "".join(name.split()).lower().removeprefix("#")
         if key.startswith("<") and key.endswith(">"):
             key = key[1:-1]
+        frame = self._frames[0 if top_level else -1]
         if key.isdigit():
             number = int(key)
-            return (self._frames[-1].numbered if number <= 30 else self._numbered).get(number)
-        return (self._globals if key.startswith("_") else self._frames[-1].named).get(key)
+            return (frame.numbered if number <= 30 else self._numbered).get(number)
+        return (self._globals if key.startswith("_") else frame.named).get(key)
 
     def _reset(self) -> None:
         self._frames = [_Frame()]

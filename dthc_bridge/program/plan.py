@@ -48,6 +48,7 @@ from ..controller.commands import (
 from ..controller.dialect import Dialect
 from ..controller.gcode import ParsedLine, parse_line
 from ..controller.words import GcodeSyntaxError, Word, tokenize
+from ..materials.library import MM_PER_INCH
 from .ngc import EvaluatedLine, NgcError, NgcProgram
 from .ngc import format_number as _fmt
 
@@ -63,7 +64,6 @@ __all__ = [
     "parse_code_map",
 ]
 
-MM_PER_INCH = 25.4
 CUT_FEED_PIN = "plasmac.cut-feed-rate"
 
 DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
@@ -166,13 +166,14 @@ class _Modal:
 
 @dataclass
 class ProgramPlan:
-    """The steps of one program. ``cut_feed`` is read by ``#<_hal[plasmac.cut-feed-rate]>``:
-    the caller sets it from the daemon's answer to ``M190`` before the next step is taken."""
+    """The steps of one program. ``cut_feed_mm_min`` is read, in the program's units, by
+    ``#<_hal[plasmac.cut-feed-rate]>``: the caller sets it from the daemon's answer to
+    ``M190`` before the next step is taken."""
 
     lines: Sequence[str]
     dialect: Dialect
     codes: Mapping[str, str] = field(default_factory=dict)
-    cut_feed: float | None = None
+    cut_feed_mm_min: float | None = None
     warnings: list[str] = field(default_factory=list)
     z_stripped: int = 0
 
@@ -187,7 +188,8 @@ class ProgramPlan:
     # --- program parameters ----------------------------------------------------------------
 
     def parameter(self, name: str) -> float | None:
-        return None if self._ngc is None else self._ngc.get(name)
+        """A program setting (``#<keep-z-motion>``): set at the top level, read anywhere."""
+        return None if self._ngc is None else self._ngc.get(name, top_level=True)
 
     @property
     def keep_z_motion(self) -> bool:
@@ -200,9 +202,9 @@ class ProgramPlan:
     def _hal(self, pin: str) -> float:
         if pin != CUT_FEED_PIN:
             raise ValueError(f"HAL pin {pin!r} is not readable here (only {CUT_FEED_PIN})")
-        if self.cut_feed is None:
-            raise ValueError("no material in force yet (M190 P<n> before the feed)")
-        return self.cut_feed
+        if self.cut_feed_mm_min is None:  # the daemon did not say (it always does)
+            raise ValueError("the feed of the material in force is not known")
+        return self.cut_feed_mm_min / self._modal.units
 
     # --- steps -----------------------------------------------------------------------------
 
@@ -238,7 +240,7 @@ class ProgramPlan:
         if self._warned_filter or self._ngc is None:
             return
         for name in _FILTER_PARAMS:
-            value = self._ngc.get(name)
+            value = self.parameter(name)
             if value:
                 self._warned_filter = True
                 self.warnings.append(
@@ -248,9 +250,9 @@ class ProgramPlan:
                 return
 
     def _line(self, number: int, text: str) -> Iterator[Step]:
+        here = text.strip()  # as written: a mapped code is reported as the user wrote it
         text = self._mapped(text)
         words = list(tokenize(text).words)
-        here = text.strip()
         gs = {w.value for w in words if w.letter == "G"}
         ms = {w.value for w in words if w.letter == "M"}
         self._track_modal(words)

@@ -127,10 +127,11 @@ class Sender:
         report.dialect = str(dialect)
         plan = ProgramPlan(lines, dialect, dict(codes or {}))
         try:
-            await self.daemon.request("program_start")
+            started = await self.daemon.request("program_start")
         except DaemonError as exc:
             report.error, report.error_line = str(exc), start_line
             return report
+        self._note_cut_feed(started, plan)
         number = start_line
         for step in plan.steps():
             number = step.source_line
@@ -179,6 +180,12 @@ class Sender:
             return
         await self._daemon_line(step, plan, report)
 
+    @staticmethod
+    def _note_cut_feed(data: Mapping[str, Any], plan: ProgramPlan) -> None:
+        """The material in force changed (program start, M190): ``plasmac.cut-feed-rate``."""
+        if isinstance(data.get("cut_feed_mm_min"), int | float):
+            plan.cut_feed_mm_min = float(data["cut_feed_mm_min"])
+
     async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
         xy = await self._wait_motion()
@@ -187,8 +194,7 @@ class Sender:
         data = await self.daemon.gcode(
             step.line, line_number=step.source_line, xy=xy, dialect=str(plan.dialect)
         )
-        if isinstance(data.get("cut_feed"), int | float):
-            plan.cut_feed = float(data["cut_feed"])  # #<_hal[plasmac.cut-feed-rate]>
+        self._note_cut_feed(data, plan)
         report.lines_sent += 1
         report.plasma_commands += len(parsed.commands)
         for command in parsed.commands:

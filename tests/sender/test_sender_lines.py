@@ -22,7 +22,8 @@ class FakeDaemon:
 
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
         self.requests.append(name)
-        return {}
+        # program_start: material 0 (the default) is in force, feed 3000.
+        return {"material": 0, "cut_feed_mm_min": 3000.0} if name == "program_start" else {}
 
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         pass
@@ -40,7 +41,7 @@ class FakeDaemon:
     ) -> dict[str, Any]:
         self.lines.append(line)
         self.dialects.add(dialect)
-        return {"cut_feed": 2500.0} if line.startswith("M190") else {}
+        return {"cut_feed_mm_min": 2500.0} if line.startswith("M190") else {}
 
 
 class FakeBackend:
@@ -145,6 +146,14 @@ async def test_plasmac_program_with_material_feed_and_stripped_z() -> None:
     assert "F2500" in backend.queued
     assert daemon.lines == ["T0 M6", "M190 P3", "M3 $0 S1", "G1 F2500", "M5 $0"]
     assert daemon.dialects == {"plasmac"}
+
+
+async def test_the_cut_feed_before_any_m190_is_the_material_in_force_at_start() -> None:
+    """PlasmaC's pin always reads the material in force; in the program's units."""
+    feed = "F#<_hal[plasmac.cut-feed-rate]>"
+    _daemon, backend = await _send(["T0 M6", feed, "G20", feed], Dialect.PLASMAC)
+    assert backend.queued[:2] == ["F3000", "G20"]
+    assert float(backend.queued[2][1:]) == pytest.approx(3000 / 25.4)
 
 
 async def test_pierce_only_pierces_and_skips_the_cut() -> None:
