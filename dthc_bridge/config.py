@@ -20,7 +20,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 import firmware_protocol as fp
@@ -30,6 +30,7 @@ from .controller.sequence import SequenceConfig
 from .controller.thc import ThcConfig
 from .link import LinkTiming
 from .mqtt.settings import MqttSettings
+from .program.plan import parse_code_map
 
 __all__ = [
     "ConfigError",
@@ -90,7 +91,7 @@ class ThcSettings(_Closed):
 
 _NOT_SEQUENCE = frozenset(
     {"dialect", "plasma_mode_at_start", "materials_file", "materials_in_inches",
-     "default_cut_feed_mm_min"}
+     "default_cut_feed_mm_min", "codes"}
 )  # fmt: skip
 
 
@@ -127,6 +128,14 @@ class ControllerSettings(_Closed):
     materials_in_inches: bool = False  # the library's lengths and feeds are inches
     # Material 0 (the default): the default cut parameters with this cut feed.
     default_cut_feed_mm_min: float = Field(3000.0, gt=0.0, le=50_000.0)
+    # A shop's own codes mapped to the daemon's ({"H1" = "M667"}): the sender and
+    # check-program rewrite them before parsing (the sender asks at program_start).
+    codes: dict[str, str] = {}
+
+    @field_validator("codes")
+    @classmethod
+    def _check_codes(cls, codes: dict[str, str]) -> dict[str, str]:
+        return parse_code_map([f"{code}={line}" for code, line in codes.items()])
 
     def sequence(self) -> SequenceConfig:
         fields = self.model_dump(exclude={"mode", "thc", *_NOT_SEQUENCE})

@@ -71,7 +71,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         controller, supervisor, client, board_setup=setup,
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
-        dialect=Dialect(settings.dialect), materials=store,
+        dialect=Dialect(settings.dialect), materials=store, codes=settings.codes,
     )  # fmt: skip
     return supervisor, service
 

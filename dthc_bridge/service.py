@@ -74,9 +74,11 @@ class ControllerService:
         board_setup: Callable[[BoardClient], Awaitable[None]] | None = None,
         dialect: Dialect = Dialect.MASSO,
         materials: MaterialStore | None = None,
+        codes: Mapping[str, str] | None = None,
     ) -> None:
         self.controller = controller
         self.dialect = dialect  # of lines whose request names none
+        self.codes = dict(codes or {})  # the shop's own codes, told to senders at program_start
         self.material_store = materials
         self.sequence = controller.sequence
         self.supervisor = supervisor
@@ -136,7 +138,12 @@ class ControllerService:
             if self.sequence.busy:
                 return CommandResult(False, error=f"program_start: a cut is running "
                                      f"({self.sequence.state})")  # fmt: skip
-            return CommandResult(True, self.controller.begin_program())
+            # The sender learns the shop's set-up here: the dialect to assume when a program
+            # says nothing dialect-specific, and the code table it rewrites lines with.
+            started = self.controller.begin_program()
+            return CommandResult(
+                True, {**started, "dialect": str(self.dialect), "codes": dict(self.codes)}
+            )
         try:
             command = parse_request(name, args)
         except CommandError as exc:

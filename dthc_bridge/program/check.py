@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..config import ConfigError, load_config
 from ..controller.commands import (
     CommandError,
     DefineMaterial,
@@ -208,10 +209,17 @@ def check_program(
     inch_materials: bool = False,
     default_feed_mm_min: float = 3000.0,
     plasma_mode_at_start: bool = False,
+    fallback_dialect: Dialect | None = None,
 ) -> CheckReport:
-    """Plan ``lines`` as the sender would and apply them to a board-less controller."""
+    """Plan ``lines`` as the sender would and apply them to a board-less controller.
+
+    ``fallback_dialect``: the daemon's ``controller.dialect``, assumed (as the sender does)
+    when the program has nothing dialect-specific."""
     if dialect is None:
-        dialect, why = detect_dialect(lines)
+        fallback = None
+        if fallback_dialect is not None:
+            fallback = (fallback_dialect, "the daemon's controller.dialect")
+        dialect, why = detect_dialect(lines, fallback)
     else:
         why = "given"
     report = CheckReport(str(dialect), why)
@@ -257,6 +265,11 @@ def check_program(
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", type=Path, help="the G-code program")
     parser.add_argument(
+        "--config", type=Path, default=None,
+        help="the daemon's config.toml: check as that daemon runs (its dialect, codes, "
+        "materials file, inch materials, plasma mode at start, default feed)",
+    )  # fmt: skip
+    parser.add_argument(
         "--materials", type=Path, default=None, help="a QtPlasmaC material file (NAME.cfg)"
     )
     parser.add_argument("--inch-materials", action="store_true", help="its lengths are inches")
@@ -295,14 +308,23 @@ def _text(report: CheckReport, path: Path) -> str:
 def run_from_args(args: argparse.Namespace) -> int:
     """Exit 0 only when nothing is refused; 2 when the files cannot be read."""
     try:
+        daemon = load_config(args.config).controller if args.config else None
         lines = args.file.read_text(encoding="utf-8", errors="replace").splitlines()
-        materials = MaterialStore(args.materials).load() if args.materials else {}
-    except (OSError, MaterialError) as exc:
+        library = args.materials or (daemon.materials_file if daemon else None)
+        materials = MaterialStore(library).load() if library else {}
+    except (OSError, MaterialError, ConfigError) as exc:
         print(f"dthc-bridge check-program: {exc}")
         return 2
+    # The options given on the command line win over the daemon's configuration.
     report = check_program(
-        lines, dialect=args.dialect, codes=args.codes, materials=materials,
-        inch_materials=args.inch_materials, plasma_mode_at_start=args.plasma_mode_at_start,
+        lines, dialect=args.dialect, materials=materials,
+        codes={**(daemon.codes if daemon else {}), **args.codes},
+        inch_materials=args.inch_materials or bool(daemon and daemon.materials_in_inches),
+        plasma_mode_at_start=(
+            args.plasma_mode_at_start or bool(daemon and daemon.plasma_mode_at_start)
+        ),
+        default_feed_mm_min=daemon.default_cut_feed_mm_min if daemon else 3000.0,
+        fallback_dialect=Dialect(daemon.dialect) if daemon else None,
     )  # fmt: skip
     print(json.dumps(report.as_dict()) if args.json else _text(report, args.file))
     return 0 if report.ok else 1

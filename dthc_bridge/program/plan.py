@@ -106,8 +106,13 @@ class Refused:
 Step = DaemonStep | MotionStep | DwellStep | Refused
 
 
-def detect_dialect(lines: Sequence[str]) -> tuple[Dialect, str]:
-    """The dialect a program is most likely written in, and why (what was found)."""
+def detect_dialect(
+    lines: Sequence[str], fallback: tuple[Dialect, str] | None = None
+) -> tuple[Dialect, str]:
+    """The dialect a program is most likely written in, and why (what was found).
+
+    ``fallback``: the dialect (and its reason) when nothing dialect-specific is found; the
+    daemon's ``controller.dialect`` where it is known, else NGC (LinuxCNC)."""
     text = "\n".join(lines)
     checks: list[tuple[Dialect, str, str]] = [
         (Dialect.MASSO, r"\bT\s*112\b|\bG\s*200\b|\bM\s*66[67]\b", "T112/G200/M666/M667"),
@@ -119,7 +124,8 @@ def detect_dialect(lines: Sequence[str]) -> tuple[Dialect, str]:
     for dialect, pattern, found in checks:
         if re.search(pattern, text, re.IGNORECASE):
             return dialect, f"found {found}"
-    return Dialect.PLASMAC, "nothing dialect-specific found: NGC (LinuxCNC) assumed"
+    dialect, why = fallback or (Dialect.PLASMAC, "NGC (LinuxCNC) assumed")
+    return dialect, f"nothing dialect-specific found: {why}"
 
 
 def parse_code_map(pairs: Sequence[str]) -> dict[str, str]:

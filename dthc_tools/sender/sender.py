@@ -116,21 +116,25 @@ class Sender:
     ) -> SendReport:
         """Send the program from ``start_line`` (1-based); stop at the first error.
 
-        ``dialect``: None detects it (:func:`~dthc_bridge.program.plan.detect_dialect`);
-        ``codes`` maps a shop's own codes to the daemon's (``{"H1": "M667"}``)."""
+        ``dialect``: None detects it (:func:`~dthc_bridge.program.plan.detect_dialect`;
+        the daemon's ``controller.dialect`` when nothing dialect-specific is found);
+        ``codes`` maps a shop's own codes to the daemon's (``{"H1": "M667"}``), on top of
+        the daemon's ``controller.codes`` table."""
         report = SendReport()
         self._pause.clear()
         self.velocity_percent = 100.0
-        if dialect is None:
-            dialect, why = detect_dialect(lines)
-            log.info("dialect_detected", dialect=str(dialect), why=why)
-        report.dialect = str(dialect)
-        plan = ProgramPlan(lines, dialect, dict(codes or {}))
         try:
             started = await self.daemon.request("program_start")
         except DaemonError as exc:
             report.error, report.error_line = str(exc), start_line
             return report
+        if dialect is None:
+            dialect, why = detect_dialect(lines, _daemon_dialect(started))
+            log.info("dialect_detected", dialect=str(dialect), why=why)
+        report.dialect = str(dialect)
+        shop_codes = started.get("codes")
+        table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
+        plan = ProgramPlan(lines, dialect, table)
         self._note_cut_feed(started, plan)
         number = start_line
         for step in plan.steps():
@@ -237,3 +241,11 @@ def starts_cut(command: Command) -> bool:
     return isinstance(command, TorchStart) or (
         isinstance(command, ProbeAndStart) and command.mode in (0, 1)
     )
+
+
+def _daemon_dialect(started: Mapping[str, Any]) -> tuple[Dialect, str] | None:
+    """The daemon's configured dialect from its ``program_start`` answer, if it gave one."""
+    try:
+        return Dialect(str(started["dialect"])), "the daemon's controller.dialect"
+    except (KeyError, ValueError):
+        return None

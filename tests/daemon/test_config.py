@@ -120,3 +120,21 @@ def test_integer_choices_can_be_overridden_from_the_environment(
     monkeypatch.setenv("DTHC_CONTROLLER__MODE", "3")
     with pytest.raises(ValidationError, match=r"controller\.mode"):
         DaemonConfig()
+
+
+def test_a_shops_code_table_loads_normalised(tmp_path: Path) -> None:
+    path = tmp_path / "config.toml"
+    path.write_text('[controller]\ncodes = { h1 = "M667", H0 = "M666", "M10" = "M3 $0" }\n')
+    assert load_config(path).controller.codes == {"H1": "M667", "H0": "M666", "M10": "M3 $0"}
+
+
+@pytest.mark.parametrize(
+    ("table", "says"),
+    [('{ X = "M3" }', "'X=M3': expected CODE=LINE"), ('{ M10 = "M3 (" }', "'M10=M3 ('")],
+)
+def test_a_bad_code_table_entry_is_refused_naming_it(tmp_path: Path, table: str, says: str) -> None:
+    path = tmp_path / "config.toml"
+    path.write_text(f"[controller]\ncodes = {table}\n")
+    with pytest.raises(ConfigError, match=r"controller\.codes") as info:
+        load_config(path)
+    assert says in str(info.value)

@@ -95,6 +95,7 @@ SECTIONS = {
             "materials_file": "the MaterialStore the service writes",
             "materials_in_inches": "PlasmaController.inch_materials",
             "default_cut_feed_mm_min": "PlasmaController.default_material (material 0)",
+            "codes": "the sender's code table, given at program_start",
         },
         overrides={},
     ),

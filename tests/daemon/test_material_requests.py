@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from dthc_bridge.board import BoardClient
+from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.link import LinkSupervisor, LinkTiming
 from dthc_bridge.materials import MaterialStore
@@ -40,13 +41,15 @@ def library(tmp_path: Path) -> Path:
     return path
 
 
-async def service_for(path: Path | None) -> ControllerService:
+async def service_for(path: Path | None, **kwargs: Any) -> ControllerService:
     """A service whose board is never connected: material requests do not need it."""
     sim = RealtimeSimBoard(SimulatedBoard("flat_clean", seed=1))
     supervisor = LinkSupervisor("sim://board", LinkTiming(), opener=sim.opener)
     store = MaterialStore(path) if path is not None else None
     controller = PlasmaController(materials=store.load() if store else {})
-    return ControllerService(controller, supervisor, BoardClient(supervisor), materials=store)
+    return ControllerService(
+        controller, supervisor, BoardClient(supervisor), materials=store, **kwargs
+    )
 
 
 @pytest.fixture
@@ -135,3 +138,17 @@ async def test_without_a_materials_file_edits_are_refused_but_reads_work() -> No
     result = await service.execute_request("material_set", {"number": 5, **PLATE_6MM})
     assert not result.ok
     assert result.error == "material_set: no materials_file is configured"
+
+
+async def test_program_start_tells_the_sender_the_shops_set_up(library: Path) -> None:
+    """The material in force and its feed, the daemon's dialect and code table."""
+    service = await service_for(library, dialect=Dialect.RELAY, codes={"H1": "M667", "M10": "M3"})
+    assert (await service.execute_gcode("M190 P3", dialect=Dialect.PLASMAC)).ok
+    result = await service.execute_request("program_start", {})
+    assert result.ok, result.error
+    assert result.data == {
+        "material": 3,
+        "cut_feed_mm_min": 3000.0,
+        "dialect": "relay",
+        "codes": {"H1": "M667", "M10": "M3"},
+    }

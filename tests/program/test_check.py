@@ -314,3 +314,44 @@ def test_cli_unreadable_files_exit_2_naming_them(tmp_path: Path) -> None:
     result = run_cli(str(PROGRAMS / "relay_self_probe.nc"), "--materials", str(bad))
     assert result.returncode == 2
     assert "bad.cfg" in result.stdout
+
+
+def test_cli_config_checks_as_that_daemon_runs(tmp_path: Path) -> None:
+    """The daemon's dialect, code table, library and plasma mode; options still win."""
+    config = tmp_path / "config.toml"
+    config.write_text(
+        "[controller]\n"
+        'dialect = "relay"\n'
+        f'materials_file = "{INCH_MATERIALS}"\n'
+        "materials_in_inches = true\n"
+        'codes = { M10 = "M3", M11 = "M5" }\n',
+        encoding="utf-8",
+    )
+    relay = run_cli(str(PROGRAMS / "firecontrol_relay.nc"), "--config", str(config), "--json")
+    assert relay.returncode == 0, relay.stdout
+    assert [cut["line"] for cut in json.loads(relay.stdout)["cuts"]] == [8]
+
+    plain = tmp_path / "plain.nc"
+    plain.write_text("G21\nG0 Z3\nM3\nG1 X10 F2000\nM5\n", encoding="utf-8")
+    doc = json.loads(run_cli(str(plain), "--config", str(config), "--json").stdout)
+    assert doc["dialect"] == "relay"
+    assert "controller.dialect" in doc["dialect_reason"]
+
+    sheet = run_cli(str(PROGRAMS / "sheetcam_plasmac_inch.ngc"), "--config", str(config),
+                    "--json")  # fmt: skip
+    assert sheet.returncode == 0, sheet.stdout
+    assert json.loads(sheet.stdout)["cuts"][0]["material_name"] == "1/4 mild steel 65A"
+
+    overridden = run_cli(
+        str(PROGRAMS / "firecontrol_relay.nc"), "--config", str(config), "--code", "M10=M7",
+        "--json",
+    )  # fmt: skip
+    assert json.loads(overridden.stdout)["cuts"] == []
+
+
+def test_cli_bad_config_exits_2_naming_the_key(tmp_path: Path) -> None:
+    config = tmp_path / "config.toml"
+    config.write_text('[controller]\ncodes = { X = "M3" }\n', encoding="utf-8")
+    result = run_cli(str(PROGRAMS / "relay_self_probe.nc"), "--config", str(config))
+    assert result.returncode == 2
+    assert "controller.codes" in result.stdout

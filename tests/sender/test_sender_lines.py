@@ -15,15 +15,18 @@ class FakeDaemon:
     """Records the lines the sender sends to the daemon; answers every one with ok (an
     ``M190`` with the material's cut feed, 2500)."""
 
-    def __init__(self) -> None:
+    def __init__(self, started: dict[str, Any] | None = None) -> None:
         self.lines: list[str] = []
         self.requests: list[str] = []
         self.dialects: set[str | None] = set()
+        # program_start: material 0 (the default) is in force, feed 3000; the daemon's
+        # configured dialect and code table (controller.dialect, controller.codes).
+        self.started = {"material": 0, "cut_feed_mm_min": 3000.0, "dialect": "masso",
+                        "codes": {}, **(started or {})}  # fmt: skip
 
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
         self.requests.append(name)
-        # program_start: material 0 (the default) is in force, feed 3000.
-        return {"material": 0, "cut_feed_mm_min": 3000.0} if name == "program_start" else {}
+        return dict(self.started) if name == "program_start" else {}
 
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         pass
@@ -70,9 +73,12 @@ class FakeBackend:
 
 
 async def _send(
-    program: list[str], dialect: Dialect | None = Dialect.MASSO, **codes: str
+    program: list[str],
+    dialect: Dialect | None = Dialect.MASSO,
+    started: dict[str, Any] | None = None,
+    **codes: str,
 ) -> tuple[FakeDaemon, FakeBackend]:
-    daemon, backend = FakeDaemon(), FakeBackend()
+    daemon, backend = FakeDaemon(started), FakeBackend()
     report = await Sender(cast(DaemonClient, daemon), backend).run(
         program, dialect=dialect, codes=codes
     )
@@ -167,6 +173,21 @@ async def test_shop_codes_map_to_the_daemon_commands() -> None:
     """FireControl's H1/H0 in the relay dialect; a shop's own code from the table."""
     daemon, _ = await _send(["M3", "H1", "H0", "M5", "M101"], Dialect.RELAY, M101="M666")
     assert daemon.lines == ["M3", "M667", "M666", "M5", "M666"]
+
+
+async def test_the_daemons_code_table_applies_and_the_senders_own_codes_win() -> None:
+    started = {"codes": {"M10": "M3", "M11": "M5", "H7": "M667"}}
+    daemon, _ = await _send(["M10", "H7", "M11"], Dialect.RELAY, started, H7="M666")
+    assert daemon.lines == ["M3", "M666", "M5"]
+
+
+async def test_a_program_with_nothing_dialect_specific_takes_the_daemons_dialect() -> None:
+    # A plain program: in the daemon's relay dialect its M3 is a torch relay.
+    program = ["G21 G90", "G0 Z3", "M3", "G1 X10 F2000", "M5"]
+    daemon, _ = await _send(program, None, {"dialect": "relay"})
+    assert daemon.dialects == {"relay"}
+    daemon, _ = await _send(program, None, {"dialect": "plasmac"})
+    assert daemon.dialects == {"plasmac"}
 
 
 async def test_a_velocity_reduction_scales_the_feed_the_machine_runs() -> None:
