@@ -35,7 +35,7 @@ from ..controller.gcode import parse_line
 from ..controller.plasma import PlasmaController, default_material
 from ..controller.words import cutting_feed_mm_min
 from ..materials import Material, MaterialError, MaterialStore
-from .options import add_dialect_options
+from .options import add_daemon_options, add_dialect_options
 from .plan import DaemonStep, DwellStep, ProgramPlan, Refused, detect_dialect
 
 __all__ = ["CheckReport", "CutReport", "add_arguments", "check_program", "run_from_args"]
@@ -269,14 +269,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the daemon's config.toml: check as that daemon runs (its dialect, codes, "
         "materials file, inch materials, plasma mode at start, default feed)",
     )  # fmt: skip
-    parser.add_argument(
-        "--materials", type=Path, default=None, help="a QtPlasmaC material file (NAME.cfg)"
-    )
-    parser.add_argument("--inch-materials", action="store_true", help="its lengths are inches")
-    parser.add_argument(
-        "--plasma-mode-at-start", action="store_true",
-        help="as the daemon configured to start in plasma mode (posts without T112 M6)",
-    )  # fmt: skip
+    add_daemon_options(parser)
     add_dialect_options(parser)
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
 

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..controller.dialect import Dialect
 from .plan import parse_code_map
 
-__all__ = ["add_dialect_options"]
+__all__ = ["add_daemon_options", "add_dialect_options"]
 
 
 def _dialect(text: str) -> Dialect:
@@ -52,3 +53,18 @@ def add_dialect_options(parser: argparse.ArgumentParser) -> None:
         metavar="CODE=LINE",
         help="map a shop's own code to the daemon's, e.g. H1=M667 (repeatable)",
     )
+
+
+def add_daemon_options(parser: argparse.ArgumentParser) -> None:
+    """The daemon settings a program depends on (its ``[controller]`` keys of the same
+    meaning): the material library and its units, and plasma mode at start."""
+    parser.add_argument(
+        "--materials", type=Path, default=None, help="a QtPlasmaC material file (NAME.cfg)"
+    )
+    parser.add_argument(
+        "--inch-materials", action="store_true", help="the material file's lengths are inches"
+    )
+    parser.add_argument(
+        "--plasma-mode-at-start", action="store_true",
+        help="as the daemon configured to start in plasma mode (posts without T112 M6)",
+    )  # fmt: skip

@@ -330,16 +330,26 @@ class ProgramPlan:
     def _board_z_line(
         self, number: int, here: str, words: Sequence[Word], probe: bool
     ) -> Iterator[Step]:
-        """G38.2/G31 probes and G92/G10 L20 Z origins: to the daemon, in mm."""
+        """G38.2/G31 probes and G92/G10 L20 Z origins: to the daemon, in mm. The line's
+        other words (``G20 G90 G92.1`` in a preamble) still reach the motion backend."""
         units = self._modal.units
         parts: list[str] = []
         xy = [w for w in words if w.letter in "XYABC"]
-        for w in words:
-            if w.letter in "GLP" or (w.letter == "Z"):
+        heads = {31.0, 38.2, 38.3, 38.4, 38.5, 92.0, 10.0, 92.1}
+        board = [
+            w for w in words
+            if (w.letter == "G" and w.value in heads) or w.letter in "LPZ"
+            or (w.letter == "F" and probe)
+        ]  # fmt: skip
+        for w in board:
+            if w.letter == "F":
+                parts.append(f"F{_fmt(w.value * units)}")
+            else:
                 scale = units if w.letter == "Z" else 1.0
                 parts.append(f"{w.letter}{_fmt(w.value * scale)}")
-            elif w.letter == "F" and probe:
-                parts.append(f"F{_fmt(w.value * units)}")
+        modal = [w for w in words if w not in board and w not in xy and w.letter != "N"]
+        if modal:
+            yield MotionStep(" ".join(f"{w.letter}{w.number}" for w in modal), number, here)
         self._modal.z = None  # where a probe stops, or what an origin makes Z read
         yield DaemonStep(" ".join(parts), number, here)
         if any(_is_g(w, 92.1) for w in words):

@@ -49,6 +49,7 @@ class DemoRun:
     materials: Path | None = None
     dialect: Dialect | None = None
     codes: Mapping[str, str] = field(default_factory=dict)
+    controller: Mapping[str, object] = field(default_factory=dict)  # [controller] keys
 
 
 async def _run(run: DemoRun, workdir: Path, broker: str) -> StackResult:
@@ -58,7 +59,7 @@ async def _run(run: DemoRun, workdir: Path, broker: str) -> StackResult:
         shutil.copyfile(run.materials, materials)
     options = StackOptions(
         workdir, scenario=run.scenario, broker=broker, telemetry_hz=TELEMETRY_HZ,
-        materials_file=materials,
+        materials_file=materials, controller=dict(run.controller),
     )  # fmt: skip
     async with Stack(options) as stack:
         report = await stack.send(program_lines(run.program), dialect=run.dialect, codes=run.codes)
@@ -69,10 +70,15 @@ def run_demo(
     *, as_json: bool = False, program: str = "masso_sample", plot: Path | None = None,
     broker: str = "auto", scenario: str | None = None, materials: Path | None = None,
     dialect: Dialect | None = None, codes: Mapping[str, str] | None = None,
+    controller: Mapping[str, object] | None = None,
 ) -> int:  # fmt: skip
-    """The whole stack over ``program``: a built-in name or a G-code file."""
+    """The whole stack over ``program``: a built-in name or a G-code file; ``controller``:
+    daemon ``[controller]`` settings (``plasma_mode_at_start``, ``materials_in_inches``)."""
     default_scenario, cut_height_mm = PROGRAMS.get(program, ("flat_clean", 1.5))
-    run = DemoRun(program, scenario or default_scenario, materials, dialect, dict(codes or {}))
+    run = DemoRun(
+        program, scenario or default_scenario, materials, dialect, dict(codes or {}),
+        dict(controller or {}),
+    )  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="dthc-demo-") as tmp:
         result = asyncio.run(_run(run, Path(tmp), broker))
         summary = summarize(result, TELEMETRY_HZ)

@@ -1,5 +1,6 @@
 """``dthc-bridge demo [--program NAME|PATH] [--scenario NAME] [--materials FILE]
-[--dialect NAME] [--code CODE=LINE] [--json] [--plot PNG] [--broker KIND]``."""
+[--inch-materials] [--plasma-mode-at-start] [--dialect NAME] [--code CODE=LINE] [--json]
+[--plot PNG] [--broker KIND]``."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from dthc_bridge.program.options import add_dialect_options
+from dthc_bridge.program.options import add_daemon_options, add_dialect_options
 
 from . import PROGRAMS, run_demo
 
@@ -32,9 +33,7 @@ def build_parser(prog: str = "dthc-bridge demo") -> argparse.ArgumentParser:
     parser.add_argument(
         "--scenario", default=None, help="the mock's plant (default: the program's, or flat_clean)"
     )
-    parser.add_argument(
-        "--materials", type=Path, default=None, help="the daemon's material file (QtPlasmaC)"
-    )
+    add_daemon_options(parser)
     add_dialect_options(parser)
     parser.add_argument("--plot", type=Path, help="PNG to write (default out/demo.png)")
     parser.add_argument("--broker", default="auto", choices=["auto", "mosquitto", "amqtt"])
@@ -51,4 +50,6 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge demo") -
     return run_demo(
         as_json=args.json, program=args.program, plot=args.plot, broker=args.broker,
         scenario=args.scenario, materials=args.materials, dialect=args.dialect, codes=args.codes,
+        controller={"materials_in_inches": args.inch_materials,
+                    "plasma_mode_at_start": args.plasma_mode_at_start},
     )  # fmt: skip

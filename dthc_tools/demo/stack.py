@@ -54,6 +54,7 @@ class StackOptions:
     mock_args: tuple[str, ...] = ()
     daemon_env: dict[str, str] = field(default_factory=dict)
     materials_file: Path | None = None  # the daemon's material library (QtPlasmaC format)
+    controller: dict[str, object] = field(default_factory=dict)  # more [controller] keys
 
 
 @dataclass
@@ -208,11 +209,13 @@ class Stack:
             f"state_poll_s = 0.05\nreconnect_initial_s = 0.1\nreconnect_max_s = 1.0\n\n"
             f'[logging]\nlevel = "info"\njson_logs = true\n'
         )
+        controller = dict(self.options.controller)
         if self.options.materials_file is not None:
+            controller["materials_file"] = str(self.options.materials_file)
+        if controller:
             with config.open("a") as toml:
-                toml.write(
-                    f"\n[controller]\nmaterials_file = {str(self.options.materials_file)!r}\n"
-                )
+                toml.write("\n[controller]\n")
+                toml.writelines(f"{key} = {_toml(value)}\n" for key, value in controller.items())
         self.daemon = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
             [sys.executable, "-m", "dthc_bridge", "run", "--config", str(config)],
             stdout=self._log("daemon.log"), stderr=subprocess.STDOUT,
@@ -331,3 +334,12 @@ class Stack:
             list(self.events),
             self.truth,
         )
+
+
+def _toml(value: object) -> str:
+    """A TOML value for the few kinds the demo writes (JSON strings are TOML strings)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{json.dumps(k)} = {_toml(v)}" for k, v in value.items()) + " }"
+    return json.dumps(value)

@@ -55,6 +55,31 @@ async def test_plasmac_program_with_a_material_change_and_a_hole_over_cut(
     assert cuts[1]["arc_on_s"] < 4.0
 
 
+async def test_sheetcam_inch_program_with_an_inch_material_library(tmp_path: Path) -> None:
+    """G20 in a preamble beside G92.1, an inch library (M190 P2), the feed read from it: the
+    machine runs inches at the material's feed, so the THC takes its target and works."""
+    materials = tmp_path / "materials.cfg"
+    shutil.copyfile(PROGRAMS / "shop_material_inch.cfg", materials)
+    options = StackOptions(
+        tmp_path, broker="mosquitto", materials_file=materials,
+        controller={"materials_in_inches": True},
+    )  # fmt: skip
+    async with Stack(options) as stack:
+        report = await stack.send(program_lines(str(PROGRAMS / "sheetcam_plasmac_inch.ngc")))
+        result = await stack.finish(report)
+    summary = summarize(result, options.telemetry_hz)
+    assert report.dialect == "plasmac"
+    assert summary["errors"] == [], summary["errors"]
+    assert summary["safety_violations"] == 0
+    assert summary["completed_cuts"] == 2
+    cuts = summary["cuts"]
+    assert isinstance(cuts, list)
+    # 4 + 3 + 4 + 3 inches at 80 in/min: 10.5 s with the pierce; run in mm it would crawl.
+    assert 10.0 < cuts[0]["arc_on_s"] < 14.0
+    assert cuts[0]["target_v"] == 128.0  # CUT_VOLTS of material 2
+    assert cuts[0]["thc_active_s"] > 5.0  # at speed, so not held by anti-dive
+
+
 async def test_relay_program_probes_and_moves_z_itself(tmp_path: Path) -> None:
     """grbl-style: G38.2 by the board, G92 Z, its own Z moves and dwell, M3 a bare relay,
     FireControl's H1/H0 switching the THC."""

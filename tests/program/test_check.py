@@ -89,7 +89,7 @@ def test_parametric_program_unrolls_loops_and_subroutines() -> None:
     assert len(report.cuts) == 4
     assert {cut.line for cut in report.cuts} == {10}
     assert {cut.material_name for cut in report.cuts} == {"scrap 3mm"}
-    assert {cut.target_v for cut in report.cuts} == {118.0}
+    assert {cut.target_v for cut in report.cuts} == {None}  # no cv: auto voltage
     # #<keep-z-motion> = 1 at the top level holds inside the subroutine: nothing stripped.
     assert not any("stripped" in w for w in report.warnings)
 

@@ -95,6 +95,15 @@ async def test_modal_only_lines_reach_the_motion_backend(line: str) -> None:
     assert daemon.lines == []
 
 
+async def test_modal_words_beside_a_board_z_word_still_reach_the_motion_backend() -> None:
+    """A preamble with G92.1, a probe or origin line with G20/G91: the units must not be
+    lost, or the machine runs an inch program in millimetres."""
+    program = ["N10 G20 G40 G90 G92.1", "G21 G92 Z-1.5", "G38.2 Z-2 F12"]
+    daemon, backend = await _send(program, Dialect.RELAY)
+    assert backend.queued == ["G20 G40 G90", "G92.1", "G21"]
+    assert daemon.lines == ["G92.1", "G92 Z-1.5", "G38.2 Z-2 F12"]
+
+
 async def test_an_incremental_program_runs_incremental() -> None:
     _daemon, backend = await _send(["G91", "G0 X10", "G0 X10"])
     assert backend.queued == ["G91", "G0 X10", "G0 X10"]
