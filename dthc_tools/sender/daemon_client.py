@@ -4,15 +4,26 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import itertools
 import json
+import random
 import uuid
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Coroutine
 from typing import Any
 
 import aiomqtt
+import structlog
+
+from dthc_bridge.backoff import backoff_delay_s
 
 __all__ = ["DaemonClient", "DaemonError"]
+
+log = structlog.get_logger("dthc_tools.sender")
+
+OFFLINE_CONFIRM_S = 0.25
+"""How long an offline availability waits for our own disconnection before it counts as the
+daemon's death: a broker shutting down sends the daemon's will, then drops us in ms."""
 
 
 class DaemonError(Exception):
@@ -20,6 +31,16 @@ class DaemonError(Exception):
 
 
 class DaemonClient:
+    """The daemon's request/response contract, over a connection that survives the broker.
+
+    The broker may restart mid-program: the client reconnects (capped, jittered backoff),
+    subscribes again and re-publishes every request still without an answer, with the
+    same transaction. The daemon answers a repeated transaction from its cache instead of
+    running it again (``dthc_bridge/mqtt/transactions.py``), so an ``M3`` is neither lost
+    nor run twice. Requests are also re-published whenever the daemon announces itself
+    online, in case it reconnected to a broker that had lost them.
+    """
+
     def __init__(
         self,
         host: str,
@@ -31,40 +52,116 @@ class DaemonClient:
         username: str | None = None,
         password: str | None = None,
         timeout_s: float = 60.0,
+        reconnect_initial_s: float = 0.2,
+        reconnect_max_s: float = 5.0,
     ) -> None:
         self.root = f"{base_topic}/{board_id}"
         self.timeout_s = timeout_s
+        self.reconnect_initial_s = reconnect_initial_s
+        self.reconnect_max_s = reconnect_max_s
         version = aiomqtt.ProtocolVersion.V5 if protocol == "5" else aiomqtt.ProtocolVersion.V311
-        self._client = aiomqtt.Client(
-            host, port, protocol=version, username=username, password=password,
-            identifier=f"dthc-sender-{uuid.uuid4().hex[:8]}", timeout=10.0,
+        identifier = f"dthc-sender-{uuid.uuid4().hex[:8]}"
+        self._new_client = functools.partial(
+            aiomqtt.Client, host, port, protocol=version, username=username,
+            password=password, identifier=identifier, timeout=10.0,
         )  # fmt: skip
+        self._client: aiomqtt.Client | None = None  # while connected and subscribed
         self._ids = itertools.count(1)
         # Transactions are unique per run: the daemon answers a repeated transaction from
         # its cache instead of running it (exactly-once), so a second run must not reuse
         # the first run's "s1", "s2", ...
         self._run_id = uuid.uuid4().hex[:8]
         self._waiting: dict[str, asyncio.Future[dict[str, Any]]] = {}
+        self._unanswered: dict[str, tuple[str, str]] = {}  # transaction: (topic, payload)
         self._event_handlers: list[Callable[[dict[str, Any]], None]] = []
         self._offline_handlers: list[Callable[[], None]] = []
         self._task: asyncio.Task[None] | None = None
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._broker_lost = asyncio.Event()  # set from a connection loss to the reconnect
+        self._rng = random.Random()
+        self.reconnects = 0
+        self.republished = 0  # requests sent again after a reconnect (same transaction)
         # A request published while the daemon is not subscribed would be dropped by the
         # broker: wait for its availability (retained, republished on every reconnect).
         self._online = asyncio.Event()
 
     @contextlib.asynccontextmanager
     async def connected(self) -> AsyncIterator[DaemonClient]:
-        async with self._client:
-            await self._client.subscribe(f"{self.root}/response/#", qos=1)
-            await self._client.subscribe(f"{self.root}/event", qos=1)
-            await self._client.subscribe(f"{self.root}/availability", qos=1)
-            self._task = asyncio.create_task(self._pump(), name="sender-mqtt")
+        """Connected for the block; the first connection must succeed (else its
+        ``aiomqtt.MqttError``), a later loss is reconnected in the background."""
+        first: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._task = asyncio.create_task(self._run(first), name="sender-mqtt")
+        try:
+            await first
+            yield self
+        finally:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
+                await self._task
+
+    async def _run(self, first: asyncio.Future[None]) -> None:
+        failures = 0
+        loop = asyncio.get_running_loop()
+        lost_at = 0.0
+        while True:
             try:
-                yield self
-            finally:
-                self._task.cancel()
-                with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
-                    await self._task
+                async with self._new_client() as client:
+                    for leaf in ("response/#", "event", "availability"):
+                        await client.subscribe(f"{self.root}/{leaf}", qos=1)
+                    self._client = client
+                    self._broker_lost.clear()
+                    if first.done():
+                        self.reconnects += 1
+                        log.info(
+                            "broker_reconnected", attempts=failures,
+                            down_s=round(loop.time() - lost_at, 3),
+                            unanswered=len(self._unanswered),
+                        )  # fmt: skip
+                        await self._republish(client)
+                    else:
+                        first.set_result(None)
+                    failures = 0
+                    await self._pump(client)
+            except aiomqtt.MqttError as exc:
+                if self._client is not None:
+                    lost_at = loop.time()
+                self._client = None
+                self._broker_lost.set()
+                # The broker, not the daemon, went away: the daemon's availability comes
+                # again (retained) after the reconnect; pending requests wait for it.
+                self._online.clear()
+                if not first.done():
+                    first.set_exception(exc)  # the caller names the broker it could not reach
+                    return
+                failures += 1
+                delay = backoff_delay_s(
+                    failures, initial_s=self.reconnect_initial_s,
+                    max_s=self.reconnect_max_s, rng=self._rng,
+                )  # fmt: skip
+                log.warning("broker_lost", error=str(exc), retry_in_s=round(delay, 3))
+                await asyncio.sleep(delay)
+
+    async def _confirm_offline(self) -> None:
+        """A broker shutting down publishes every client's will, the daemon's too, and then
+        drops us: an offline followed at once by our own disconnection is the broker going
+        away (reconnect and go on), not the daemon dying (fail what is pending, hold)."""
+        try:
+            await asyncio.wait_for(self._broker_lost.wait(), OFFLINE_CONFIRM_S)
+        except TimeoutError:
+            if not self._online.is_set():
+                self._went_offline()
+            return
+        log.warning("daemon_offline_was_the_broker", note="its will, sent at broker shutdown")
+
+    def _background(self, work: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.create_task(work)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _republish(self, client: aiomqtt.Client) -> None:
+        for topic, payload in list(self._unanswered.values()):
+            await client.publish(topic, payload, qos=1)
+            self.republished += 1
 
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         self._event_handlers.append(handler)
@@ -81,8 +178,8 @@ class DaemonClient:
         for handler in self._offline_handlers:
             handler()
 
-    async def _pump(self) -> None:
-        async for message in self._client.messages:
+    async def _pump(self, client: aiomqtt.Client) -> None:
+        async for message in client.messages:
             try:
                 document = json.loads(bytes(message.payload))
             except ValueError:
@@ -91,21 +188,30 @@ class DaemonClient:
                 continue
             if message.topic.matches(f"{self.root}/availability"):
                 if document.get("state") == "online":
+                    if self._unanswered:
+                        # The daemon is (back) on the broker: what it may have missed is sent
+                        # again; a repeat is answered from its cache, never run twice.
+                        await self._republish(client)
                     self._online.set()
                 elif self._online.is_set():  # online -> offline: its will, or a clean stop
                     self._online.clear()
-                    self._went_offline()
+                    self._background(self._confirm_offline())
                 continue
             if message.topic.matches(f"{self.root}/event"):
                 for handler in self._event_handlers:
                     handler(document)
                 continue
-            waiter = self._waiting.pop(str(document.get("transaction")), None)
+            transaction = str(document.get("transaction"))
+            self._unanswered.pop(transaction, None)
+            waiter = self._waiting.pop(transaction, None)
             if waiter is not None and not waiter.done():
                 waiter.set_result(document)
 
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
-        """Publish a request, wait for its response; DaemonError on an error response."""
+        """Publish a request, wait for its response; DaemonError on an error response.
+
+        A broker restart meanwhile is ridden out: the request is published again, with
+        the same transaction, once the connection is back."""
         try:
             await asyncio.wait_for(self._online.wait(), self.timeout_s)
         except TimeoutError:
@@ -113,14 +219,20 @@ class DaemonClient:
         transaction = f"{self._run_id}-{next(self._ids)}"
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._waiting[transaction] = future
-        payload = {**args, "transaction": transaction}
-        await self._client.publish(f"{self.root}/request/{name}", json.dumps(payload), qos=1)
+        topic = f"{self.root}/request/{name}"
+        payload = json.dumps({**args, "transaction": transaction})
+        self._unanswered[transaction] = (topic, payload)
         try:
+            client = self._client
+            if client is not None:
+                with contextlib.suppress(aiomqtt.MqttError):  # lost: sent again on reconnect
+                    await client.publish(topic, payload, qos=1)
             response = await asyncio.wait_for(future, self.timeout_s)
         except TimeoutError:
             raise DaemonError(f"{name}: no response within {self.timeout_s:.0f} s") from None
         finally:
             self._waiting.pop(transaction, None)
+            self._unanswered.pop(transaction, None)
         if response.get("status") != "ok":
             raise DaemonError(str(response.get("error") or "error"))
         data: dict[str, Any] = response.get("data") or {}
