@@ -19,18 +19,20 @@ from dthc_tools.demo.summary import summarize
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
+
+def square_at(x: int) -> list[str]:
+    """One cut: start, THC on, two sides of a square, THC off, stop."""
+    return [f"G0 X{x} Y20", "M3", "M667 F600", f"G1 X{x + 60} Y20 F3000",
+            f"G1 X{x + 60} Y60", "M666", "M5"]  # fmt: skip
+
+
 PROGRAM = [
     "G21 G90",
     "T112 M6",
     "G200 F300 P3.8 D300 C1.5 V0 A90 O1 S0",
-    *[
-        line
-        for x in (20, 120, 220)
-        for line in (
-            f"G0 X{x} Y20", "M3", "M667 F600", f"G1 X{x + 60} Y20 F3000", f"G1 X{x + 60} Y60",
-            "M666", "M5",
-        )  # fmt: skip
-    ],
+    *square_at(20),
+    *square_at(120),
+    *square_at(220),
     "G0 X0 Y0",
     "M30",
 ]
