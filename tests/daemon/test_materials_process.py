@@ -54,9 +54,19 @@ async def online(probe: Probe, topic: str) -> None:
                           STARTUP_S)  # fmt: skip
 
 
-async def retained_materials(probe: Probe, topic: str, numbers: list[int]) -> dict[str, Any]:
+async def retained_materials(
+    probe: Probe, topic: str, numbers: list[int], speed_of_3: float | None = None
+) -> dict[str, Any]:
+    """The first ``materials`` document listing ``numbers`` (and material 3 at that speed:
+    the documents published between two changes list the same numbers)."""
+
     def listed(doc: dict[str, Any]) -> bool:
-        return [m["number"] for m in doc.get("materials", [])] == numbers
+        materials = doc.get("materials", [])
+        if [m["number"] for m in materials] != numbers:
+            return False
+        return speed_of_3 is None or any(
+            m["number"] == 3 and m["cut_speed"] == speed_of_3 for m in materials
+        )
 
     return await probe.wait_json(f"{topic}/materials", listed, STARTUP_S)
 
@@ -85,7 +95,7 @@ async def test_material_file_round_trips_through_mqtt_and_a_daemon_crash(
             bad = await request(probe, topic, "material_set", {"number": 9, "name": "x"})
             assert bad["status"] == "error"
             assert "pierce_height" in bad["error"]
-            published = await retained_materials(probe, topic, [0, 3, 8])
+            published = await retained_materials(probe, topic, [0, 3, 8], 2600.0)
         written = library.read_bytes()
         daemon.signal(signal.SIGKILL)  # a crash: nothing more is written
         assert daemon.wait(5) == -signal.SIGKILL
@@ -104,7 +114,7 @@ async def test_material_file_round_trips_through_mqtt_and_a_daemon_crash(
     try:
         async with open_probe(own_broker, f"{topic}/#") as probe:
             await online(probe, topic)
-            again = await retained_materials(probe, topic, [0, 3, 8])
+            again = await retained_materials(probe, topic, [0, 3, 8], 2600.0)
             assert again["materials"] == published["materials"]
             got = await request(probe, topic, "material_get", {"number": 8})
             assert got["status"] == "ok", got
