@@ -95,14 +95,17 @@ class _Model:
         self.material_used = False  # an M190 or a magic comment: cuts name their material
         self.g200_seen = False  # a G200 line: its parameters, not the daemon's default
         self.last_z_mm: float | None = None  # the program's last Z move (work coordinates)
-        self._relay_pending: tuple[bool, bool] = (False, False)  # dwell, cut height still to see
+        # A relay cut's pierce delay and cut height are the program's first dwell and first
+        # Z move after its M3: still to be seen.
+        self._relay_dwell_due = False
+        self._relay_height_due = False
 
     def dwell(self, seconds: float) -> None:
         """A relay cut's pierce delay is the program's first dwell after its M3."""
         cut = self.open_cut
-        if cut is not None and cut.sequence == "relay" and self._relay_pending[0]:
+        if cut is not None and cut.sequence == "relay" and self._relay_dwell_due:
             cut.pierce_delay_s = seconds
-            self._relay_pending = (False, self._relay_pending[1])
+            self._relay_dwell_due = False
 
     def apply(self, step: DaemonStep, report: CheckReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=self.plan.dialect)
@@ -136,9 +139,9 @@ class _Model:
 
     def _z_move(self, z_mm: float) -> None:
         cut = self.open_cut
-        if cut is not None and cut.sequence == "relay" and self._relay_pending[1]:
-            cut.cut_height_mm = z_mm  # a relay cut's first Z move after M3: its cut height
-            self._relay_pending = (self._relay_pending[0], False)
+        if cut is not None and cut.sequence == "relay" and self._relay_height_due:
+            cut.cut_height_mm = z_mm
+            self._relay_height_due = False
         self.last_z_mm = z_mm
 
     def _start(
@@ -189,7 +192,7 @@ class _Model:
             # The program's own heights: where Z was at M3, and what follows it.
             cut.pierce_height_mm = self.last_z_mm
             cut.pierce_delay_s, cut.cut_height_mm = 0.0, cut.pierce_height_mm
-            self._relay_pending = (True, True)
+            self._relay_dwell_due = self._relay_height_due = True
         report.cuts.append(cut)
         self.open_cut = cut
 

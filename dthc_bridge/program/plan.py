@@ -71,6 +71,9 @@ DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
     Dialect.RELAY: {"H1": "M667", "H0": "M666"},
 }
 
+_PROBE_G = frozenset({31.0, 38.2, 38.3, 38.4, 38.5})  # the board probes (and refuses 38.4/5)
+_ORIGIN_G = frozenset({92.0, 10.0, 92.1})  # G92 Z, G10 L20 Z, G92.1: the board's Z origin
+
 _FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter", "tube-cut")
 
 
@@ -269,7 +272,7 @@ class ProgramPlan:
         if 66.0 in ms:
             self._check_m66(words)
             return  # the M190 before it was answered once the material was applied
-        probe = gs & {31.0, 38.2, 38.3, 38.4, 38.5}
+        probe = gs & _PROBE_G
         origin = (92.0 in gs or 10.0 in gs) and any(w.letter == "Z" for w in words)
         if probe or origin or 92.1 in gs:
             yield from self._board_z_line(number, here, words, bool(probe))
@@ -335,10 +338,9 @@ class ProgramPlan:
         units = self._modal.units
         parts: list[str] = []
         xy = [w for w in words if w.letter in "XYABC"]
-        heads = {31.0, 38.2, 38.3, 38.4, 38.5, 92.0, 10.0, 92.1}
         board = [
             w for w in words
-            if (w.letter == "G" and w.value in heads) or w.letter in "LPZ"
+            if (w.letter == "G" and w.value in _PROBE_G | _ORIGIN_G) or w.letter in "LPZ"
             or (w.letter == "F" and probe)
         ]  # fmt: skip
         for w in board:

@@ -337,9 +337,7 @@ class Stack:
 
 
 def _toml(value: object) -> str:
-    """A TOML value for the few kinds the demo writes (JSON strings are TOML strings)."""
+    """A TOML value for the scalars the demo writes (JSON strings and numbers are TOML's)."""
     if isinstance(value, bool):
         return "true" if value else "false"
-    if isinstance(value, dict):
-        return "{ " + ", ".join(f"{json.dumps(k)} = {_toml(v)}" for k, v in value.items()) + " }"
     return json.dumps(value)

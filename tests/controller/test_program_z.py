@@ -8,7 +8,7 @@ import pytest
 from dthc_bridge.controller.sequence import State
 from dthc_tools.sim.closed_loop import ClosedLoop
 
-from .test_sequence import SQUARE, ready
+from .test_sequence import SQUARE, assert_arc_lost_fault_path, ready
 
 
 def relay_ready(scenario: str = "flat_clean") -> ClosedLoop:
@@ -56,12 +56,7 @@ def test_arc_lost_in_a_relay_cut_takes_the_fault_path() -> None:
     assert loop.m3().ok
     assert loop.gcode("G1 Z1.5 F600").ok
     assert not loop.move("G1 X1000 Y50 F4000", max_s=30)
-    assert loop.sequence.error == "arc lost"
-    assert loop.pauses == ["arc lost"]
-    loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
-    assert not loop.plant.torch_on
-    assert loop.plant.zaxis.position_mm >= loop.sequence.safe_z_mm - 0.01
-    assert "re-arm" in loop.m3().error
+    assert_arc_lost_fault_path(loop)
 
 
 def test_program_z_moves_are_ignored_during_an_automatic_cut_with_one_warning() -> None:

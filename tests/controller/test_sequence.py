@@ -94,11 +94,8 @@ def test_no_arc_after_three_attempts_faults_and_pauses_the_sender() -> None:
     assert loop.sequence.probe_required
 
 
-def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
-    """The arc goes out mid-cut: torch off, pause requested, Z up, re-arm required."""
-    loop = ready("arc_lost_midcut")
-    assert loop.m3().ok
-    assert not loop.move("G1 X1000 Y50 F4000", max_s=30)
+def assert_arc_lost_fault_path(loop: ClosedLoop) -> None:
+    """Invariant 3 after an arc loss: torch off, pause requested, Z up, re-arm required."""
     assert loop.sequence.error == "arc lost"
     assert loop.pauses == ["arc lost"]
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
@@ -107,6 +104,14 @@ def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
     refused = loop.m3()
     assert not refused.ok
     assert "re-arm" in refused.error
+
+
+def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
+    """The arc goes out mid-cut: torch off, pause requested, Z up, re-arm required."""
+    loop = ready("arc_lost_midcut")
+    assert loop.m3().ok
+    assert not loop.move("G1 X1000 Y50 F4000", max_s=30)
+    assert_arc_lost_fault_path(loop)
     assert loop.request("rearm").ok
     assert loop.sequence.state is State.IDLE
 

@@ -22,15 +22,19 @@ async def run(program: str, scenario: str, tmp_path: Path, **options: object) ->
     return summarize(result, stack_options.telemetry_hz)
 
 
-def assert_clean(summary: dict[str, object], cuts: int, rms_mm: float, max_mm: float) -> None:
+def assert_clean(
+    summary: dict[str, object], cuts: int, rms_mm: float, max_mm: float | None = None
+) -> None:
+    """Every cut completed within ``rms_mm`` (and ``max_mm``), no violation, clean exit."""
     assert summary["errors"] == [], summary["errors"]
     assert summary["safety_violations"] == 0
     assert summary["pierces"] == cuts
     assert summary["completed_cuts"] == cuts
     assert isinstance(summary["height_rms_mm"], float)
     assert summary["height_rms_mm"] < rms_mm
-    assert isinstance(summary["height_max_err_mm"], float)
-    assert summary["height_max_err_mm"] < max_mm
+    if max_mm is not None:
+        assert isinstance(summary["height_max_err_mm"], float)
+        assert summary["height_max_err_mm"] < max_mm
     assert summary["daemon_exit_code"] == 0
     assert summary["torch_on_at_exit"] is False
 

@@ -17,19 +17,11 @@ from dthc_bridge.controller.dialect import Dialect
 from dthc_tools.demo import Stack, StackOptions, program_lines
 from dthc_tools.demo.summary import summarize
 
+from .test_end_to_end import assert_clean
+
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
 PROGRAMS = Path(__file__).parents[1] / "programs"
-
-
-def assert_clean(summary: dict[str, object], cuts: int, rms_mm: float) -> None:
-    assert summary["errors"] == [], summary["errors"]
-    assert summary["safety_violations"] == 0
-    assert summary["pierces"] == cuts
-    assert summary["completed_cuts"] == cuts
-    assert isinstance(summary["height_rms_mm"], float)
-    assert summary["height_rms_mm"] < rms_mm
-    assert summary["torch_on_at_exit"] is False
 
 
 async def test_plasmac_program_with_a_material_change_and_a_hole_over_cut(

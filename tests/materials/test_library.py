@@ -19,6 +19,7 @@ from dthc_bridge.materials import (
     material_to_dict,
     parse_material_file,
 )
+from tests.materials.recipes import recipe
 
 # A shop's library as a person might write it: comments, blank lines, ragged spacing,
 # keys in any order, empty values, optional keys left out.
@@ -74,17 +75,6 @@ PLATE_6 = Material(
     gas_pressure=5.5,
     cut_mode=1,
 )
-
-
-def recipe(number: int, **changes: object) -> Material:
-    """A valid material with ``changes``."""
-    fields: dict[str, object] = {
-        "pierce_height": 3.8,
-        "pierce_delay_s": 0.4,
-        "cut_height": 1.5,
-        "cut_speed": 3000.0,
-    }
-    return Material(number, **(fields | changes))  # type: ignore[arg-type]
 
 
 # --- the material file -------------------------------------------------------------------

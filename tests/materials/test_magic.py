@@ -13,16 +13,7 @@ from dthc_bridge.materials import (
     MaterialTable,
     parse_magic_comment,
 )
-
-
-def recipe(number: int, **changes: object) -> Material:
-    fields: dict[str, object] = {
-        "pierce_height": 3.8,
-        "pierce_delay_s": 0.4,
-        "cut_height": 1.5,
-        "cut_speed": 3000.0,
-    }
-    return Material(number, **(fields | changes))  # type: ignore[arg-type]
+from tests.materials.recipes import recipe
 
 
 def magic(text: str) -> MagicMaterial:

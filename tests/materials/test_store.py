@@ -14,23 +14,12 @@ import pytest
 
 from dthc_bridge.materials import (
     TEMPORARY_BASE,
-    Material,
     MaterialError,
     MaterialStore,
     parse_material_file,
 )
 from dthc_tools.procs import die_with_parent
-
-
-def recipe(number: int, **changes: object) -> Material:
-    fields: dict[str, object] = {
-        "pierce_height": 3.8,
-        "pierce_delay_s": 0.4,
-        "cut_height": 1.5,
-        "cut_speed": 3000.0,
-    }
-    return Material(number, **(fields | changes))  # type: ignore[arg-type]
-
+from tests.materials.recipes import recipe
 
 MILD = recipe(1, name="Mild steel 1.5 mm 45 A", thc=True, cut_amps=45, cut_volts=121)
 PLATE = recipe(7, name="Plate 6 mm 65 A", pierce_height=4.5, pierce_delay_s=0.9, cut_speed=1400)
