@@ -26,9 +26,9 @@ import firmware_protocol as fp
 
 from .board import BoardClient, Telemetry
 from .controller import actions as act
-from .controller.commands import Command, CommandError, CycleStart
+from .controller.commands import Abort, Command, CommandError, CycleStart
 from .controller.dialect import Dialect
-from .controller.gcode import parse_line, parse_request
+from .controller.gcode import parse_host_motion, parse_line, parse_request
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence, with_board_limits
 from .controller.words import cutting_feed_mm_min
@@ -61,6 +61,10 @@ TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers 
 EventListener = Callable[[ControllerEvent], None]
 MATERIAL_REQUESTS = frozenset({"materials", "material_get", "material_set", "material_delete"})
 _ENVELOPE = ("transaction", "deadline_ms")
+HOST_SPEED_STALE_S = 0.35
+"""A sender's ``motion`` report counts this long (board time): it polls its motion
+controller at 5-20 Hz, so this covers one missed report at 10 Hz; older counts as no speed
+(THC locked, ``no_speed``)."""
 
 
 class ControllerService:
@@ -92,6 +96,10 @@ class ControllerService:
         self._event_listeners: list[EventListener] = []
         self._background: set[asyncio.Task[None]] = set()
         self._requested_feed_mm_s: float | None = None
+        # The sender's measured XY speed (``motion`` request) and the board time it came at:
+        # the anti-dive input when the board has no XY speed input of its own.
+        self._host_speed: tuple[float, float] | None = None
+        self._last_board_xy: float | None = None  # board time of its last own XY speed
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self._torch_off: asyncio.Task[None] | None = None
@@ -134,6 +142,8 @@ class ControllerService:
             return CommandResult(True, self.snapshot())
         if name in MATERIAL_REQUESTS:
             return self._material_request(name, args)
+        if name == "motion":
+            return self._host_motion(args)
         if name == "program_start":
             if self.sequence.busy:
                 return CommandResult(False, error=f"program_start: a cut is running "
@@ -167,6 +177,28 @@ class ControllerService:
                 for m in (self.controller.default_material, *table.materials.values())
             ],
         }
+
+    def _host_motion(self, args: Mapping[str, object]) -> CommandResult:
+        """``motion`` {xy_speed_mm_s, feed_mm_min?, state?}: the XY speed the sender measured
+        from its motion controller's status reports (grbl's position, polled). Used for the
+        anti-dive only when the board reports no XY speed; stale after HOST_SPEED_STALE_S."""
+        try:
+            speed, feed, state = parse_host_motion(args)
+        except CommandError as exc:
+            return CommandResult(False, error=str(exc))
+        used = self._last_board_xy is None
+        if used:
+            self._host_speed = (speed, self.now)
+            if feed is not None:
+                self._requested_feed_mm_s = feed / 60.0
+        log.debug("host_motion", speed_mm_s=speed, feed_mm_min=feed, state=state, used=used)
+        return CommandResult(True, {"used": used})
+
+    def _host_speed_now(self, t_s: float) -> float | None:
+        if self._host_speed is None:
+            return None
+        speed, at_s = self._host_speed
+        return speed if t_s - at_s <= HOST_SPEED_STALE_S else None
 
     def _material_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
         """``materials``, ``material_get``/``_set``/``_delete`` {number, ...}: the library,
@@ -268,9 +300,10 @@ class ControllerService:
     # --- commands --------------------------------------------------------------------------
 
     async def _execute(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult:
-        if isinstance(command, CycleStart):
-            # Cycle start answers the M3 that waits for it (G200 S1): queued behind that M3
-            # it would wait for itself. It never defers, so it needs no turn.
+        if isinstance(command, CycleStart | Abort):
+            # Cycle start answers the M3 that waits for it (G200 S1), and a stop ends it:
+            # queued behind that M3 either would wait for itself. Neither defers, so
+            # neither needs a turn.
             result = self._apply(command, xy_mm)
             assert result is not None
             return result
@@ -414,7 +447,11 @@ class ControllerService:
     def _on_board(self, item: Telemetry, t_s: float) -> None:
         sequence = self.sequence
         if isinstance(item, fp.Samples):
-            z_mm, xy = feed_samples(sequence, item, t_s, self._requested_feed_mm_s)
+            if item.has_xy_speed:
+                self._last_board_xy = t_s
+            z_mm, xy = feed_samples(
+                sequence, item, t_s, self._requested_feed_mm_s, self._host_speed_now(t_s)
+            )
             # Only what the batch brought is kept here; telemetry() builds the point at the
             # MQTT rate, not at the sample rate.
             self._last_batch = (t_s, z_mm, xy)
@@ -496,13 +533,18 @@ class ControllerService:
 
 
 def feed_samples(
-    sequence: CutSequence, batch: fp.Samples, t_s: float, requested_feed_mm_s: float | None
+    sequence: CutSequence,
+    batch: fp.Samples,
+    t_s: float,
+    requested_feed_mm_s: float | None,
+    host_speed_mm_s: float | None = None,
 ) -> tuple[float, float | None]:
     """One SAMPLES batch into the cut sequence, in its units, at ``t_s``: the board time
-    of its last sample (the link's stamp). Returns (Z mm, XY speed mm/s or None)."""
+    of its last sample (the link's stamp). The board's XY speed when it has the input, else
+    the sender's (``host_speed_mm_s``). Returns (Z mm, XY speed mm/s or None)."""
     z_mm = batch.z_um / 1000
     sequence.on_inputs(batch.inputs, z_mm, t_s)
-    xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else None
+    xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else host_speed_mm_s
     volts = [cv / 100 for cv in batch.samples_cv]
     sequence.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, t_s)
     return z_mm, xy

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 __all__ = [
+    "Abort",
     "Command",
     "CommandError",
     "CutParams",
@@ -30,6 +31,7 @@ __all__ = [
     "SetCutParams",
     "SetWorkZ",
     "ThcEnable",
+    "ThcHold",
     "ThcMode",
     "TorchEnable",
     "TorchStart",
@@ -259,6 +261,21 @@ class Rearm:
 
 
 @dataclass(frozen=True, slots=True)
+class Abort:
+    """The operator's stop (``abort`` request): a running cut ends through the fault path
+    (torch off, safe height, re-arm before the next cut); the command waiting on it, an M3
+    in its pierce or a G200 S1 stop, is answered with the error."""
+
+
+@dataclass(frozen=True, slots=True)
+class ThcHold:
+    """The operator paused the program (``thc_hold`` request): Z holds while ``on``, without
+    changing M667/M666; a new cut starts released."""
+
+    on: bool
+
+
+@dataclass(frozen=True, slots=True)
 class OhmicTest:
     """Switch ohmic sensing on with the torch in the air: contact means a shorted torch."""
 
@@ -279,6 +296,8 @@ Command = (
     | VelocityReduction
     | CycleStart
     | Rearm
+    | Abort
+    | ThcHold
     | OhmicTest
     | TorchEnable
     | SelectMaterial

@@ -70,6 +70,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from .commands import (
+    Abort,
     Command,
     CommandError,
     CutParams,
@@ -89,6 +90,7 @@ from .commands import (
     SetCutParams,
     SetWorkZ,
     ThcEnable,
+    ThcHold,
     ThcMode,
     TorchEnable,
     TorchStart,
@@ -650,6 +652,17 @@ def _rearm(_name: str, _args: Mapping[str, object]) -> Command:
     return Rearm()
 
 
+def _abort(_name: str, _args: Mapping[str, object]) -> Command:
+    return Abort()
+
+
+def _thc_hold(name: str, args: Mapping[str, object]) -> Command:
+    on = args.get("on")
+    if not isinstance(on, bool):
+        raise CommandError(f"{name} on", f"{on!r} is not true or false")
+    return ThcHold(on)
+
+
 def _ohmic_test(_name: str, _args: Mapping[str, object]) -> Command:
     return OhmicTest()
 
@@ -677,10 +690,41 @@ _REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]],
     "torch_down": (frozenset({"volts"}), _voltage_step(-1.0)),
     "cycle_start": (frozenset(), _cycle_start),
     "rearm": (frozenset(), _rearm),
+    "thc_hold": (frozenset({"on"}), _thc_hold),
+    "abort": (frozenset(), _abort),
     "ohmic_test": (frozenset(), _ohmic_test),
     "operating_mode": (frozenset({"mode"}), _operating_mode),
     "velocity_reduction": (frozenset({"percent"}), _request_velocity_reduction),
 }
+
+MAX_HOST_SPEED_MM_S = 2000.0  # 120 m/min: faster than any plasma table's rapids
+_MOTION_KEYS = frozenset({"xy_speed_mm_s", "feed_mm_min", "state"})
+
+
+def parse_host_motion(args: Mapping[str, object]) -> tuple[float, float | None, str | None]:
+    """The ``motion`` request: (measured XY speed mm/s, programmed feed mm/min or None, the
+    motion controller's state or None). The error names the argument, as for commands."""
+    for key in args:
+        if key not in _MOTION_KEYS and key not in _ENVELOPE_KEYS:
+            raise CommandError(f"motion {key}", "unknown argument")
+    if "xy_speed_mm_s" not in args:
+        raise CommandError("motion xy_speed_mm_s", "required argument is missing")
+    speed = check_range(
+        "motion xy_speed_mm_s",
+        _arg_number("motion xy_speed_mm_s", args["xy_speed_mm_s"]),
+        0.0,
+        MAX_HOST_SPEED_MM_S,
+    )
+    feed: float | None = None
+    if args.get("feed_mm_min") is not None:
+        feed = _arg_number("motion feed_mm_min", args["feed_mm_min"])
+        if feed <= 0.0:
+            raise CommandError("motion feed_mm_min", f"{feed:g} must be > 0")
+    state = args.get("state")
+    if state is not None and not isinstance(state, str):
+        raise CommandError("motion state", f"{state!r} is not a string")
+    return speed, feed, state
+
 
 REQUEST_NAMES = frozenset(_REQUESTS)
 """The request names :func:`parse_request` understands."""

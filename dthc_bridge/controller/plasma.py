@@ -15,6 +15,7 @@ from typing import Any
 from ..materials import Material, MaterialError, MaterialTable, material_to_dict
 from ..materials import parse_magic_comment as _parse_magic
 from .commands import (
+    Abort,
     Command,
     CommandError,
     CutParams,
@@ -34,6 +35,7 @@ from .commands import (
     SetCutParams,
     SetWorkZ,
     ThcEnable,
+    ThcHold,
     TorchEnable,
     TorchStart,
     TorchStop,
@@ -244,6 +246,13 @@ class PlasmaController:
             if sequence.state is not State.FAULTED:
                 raise CommandError("rearm", f"nothing to re-arm ({sequence.state})")
             sequence.rearm(now)
+        elif isinstance(command, Abort):
+            busy = sequence.busy
+            sequence.abort("stopped by the operator")
+            return Outcome(data={"aborted": busy})
+        elif isinstance(command, ThcHold):
+            sequence.thc.held = command.on
+            return Outcome(data={"thc_held": command.on})
         elif isinstance(command, OhmicTest):
             if sequence.busy:
                 raise CommandError("ohmic_test", "not during a cut")

@@ -23,6 +23,7 @@ about the open controllers (docs/plasma-facts.md):
   the cut target applies.
 - **Kerf and void dive**: the slope of the filtered voltage locks the THC above
   ``void_slope_v_s`` and holds the lock for a quiet period after the spike.
+- **Operator pause**: ``held`` locks until the program resumes (or the next cut starts).
 - **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
 While locked, Z holds (velocity 0) and the integral is frozen, never wound up.
 """
@@ -44,6 +45,7 @@ class Lock(StrEnum):
     VELOCITY = "velocity"  # anti-dive: XY below A % of the requested feed
     VOID = "void"  # kerf or void crossing: voltage slope too steep
     NO_SPEED = "no_speed"  # XY speed unknown or stale: counts as locked
+    HELD = "held"  # the operator paused the program (thc_hold request)
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,7 @@ class ThcController:
         self.target_v: float | None = None
         self.enabled = True
         self.frozen = True
+        self.held = False  # operator pause: Z holds until released or the next cut
         self.max_speed_mm_s = self.config.max_speed_mm_s
         self.anti_dive_percent = self.config.anti_dive_lock_percent
         # Downward Z travel allowed while following slow-downs, over a whole cut: the
@@ -131,6 +134,7 @@ class ThcController:
         self._s = _State()
         self.target_v = None
         self.frozen = True
+        self.held = False
 
     def set_speed_limit(self, z_feed_mm_min: float | None) -> None:
         self.max_speed_mm_s = (
@@ -175,6 +179,8 @@ class ThcController:
         found: set[Lock] = set()
         if not self.enabled:
             found.add(Lock.DISABLED)
+        if self.held:
+            found.add(Lock.HELD)
         if self.frozen or self.target_v is None:
             found.add(Lock.FROZEN)
         if self.anti_dive_percent > 0.0:
@@ -292,6 +298,7 @@ class ThcController:
         can_follow = (
             cfg.slow_follow
             and self.enabled
+            and not self.held
             and not self.frozen
             and self.target_v is not None
             and self.anti_dive_percent > 0.0
