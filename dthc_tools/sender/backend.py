@@ -9,18 +9,31 @@ from __future__ import annotations
 
 import asyncio
 import json
+from collections.abc import Callable
 from typing import Any, Protocol
 
-__all__ = ["BackendError", "MotionBackend", "SimGantryBackend"]
+__all__ = ["BackendError", "MotionBackend", "MotionListener", "SimGantryBackend"]
+
+MotionListener = Callable[[float, str], None]
+"""Called with the measured XY speed (mm/s) and the controller's state, per status report."""
 
 
 class BackendError(Exception):
-    """The motion backend refused a line or is unreachable."""
+    """The motion backend refused a line or is unreachable; ``line_number`` is the program
+    line it refused, when the refusal names one."""
+
+    def __init__(self, message: str, *, line_number: int | None = None) -> None:
+        super().__init__(message)
+        self.line_number = line_number
 
 
 class MotionBackend(Protocol):
-    async def queue(self, line: str) -> None:
+    async def queue(self, line: str, *, source_line: int | None = None) -> None:
         """Queue one motion line (G0/G1/G2/G3 ...); returns once accepted."""
+        ...
+
+    def add_motion_listener(self, listener: MotionListener) -> None:
+        """Measured XY speed reports, for a board without an XY speed input."""
         ...
 
     async def wait_idle(self) -> tuple[float, float]:
@@ -74,8 +87,14 @@ class SimGantryBackend:
             raise BackendError(str(reply.get("error", "refused")))
         return reply
 
-    async def queue(self, line: str) -> None:
-        await self._call(op="line", gcode=line)
+    async def queue(self, line: str, *, source_line: int | None = None) -> None:
+        try:
+            await self._call(op="line", gcode=line)
+        except BackendError as exc:
+            raise BackendError(str(exc), line_number=source_line) from None
+
+    def add_motion_listener(self, listener: MotionListener) -> None:
+        """Nothing to report: the mock board measures the gantry's XY speed itself."""
 
     async def wait_idle(self) -> tuple[float, float]:
         # Its own connection: the wait may be cancelled (a pause), and a hold must not queue

@@ -13,8 +13,10 @@ import aiomqtt
 
 from dthc_bridge.program.options import add_dialect_options
 
-from .backend import SimGantryBackend
+from .backend import BackendError, MotionBackend, SimGantryBackend
+from .console import OperatorConsole
 from .daemon_client import DaemonClient
+from .grbl_backend import GrblBackend
 from .sender import Sender
 
 __all__ = ["build_parser", "main"]
@@ -29,9 +31,28 @@ def build_parser(prog: str = "dthc-bridge send") -> argparse.ArgumentParser:
     parser.add_argument("--base-topic", default="dthc")
     parser.add_argument("--board-id", default="table1")
     parser.add_argument("--protocol", default="5", choices=["5", "3.1.1"])
-    parser.add_argument("--backend", default="sim", choices=["sim"])
+    parser.add_argument(
+        "--backend", default="sim", choices=["sim", "grbl"],
+        help="sim: the mock board's gantry; grbl: a grbl/grblHAL controller for X and Y",
+    )  # fmt: skip
     parser.add_argument("--gantry", default="socket://127.0.0.1:7001", help="sim backend port")
-    parser.add_argument("--start-line", type=int, default=1, help="e.g. a G100 P0 resume point")
+    grbl = parser.add_argument_group("grbl backend")
+    grbl.add_argument("--port", help="/dev/ttyUSB0, a pty, or socket://HOST:PORT (grblHAL)")
+    grbl.add_argument("--baud", type=int, default=115_200)
+    grbl.add_argument(
+        "--streaming", default="count", choices=["count", "sync"],
+        help="count: character counting (default); sync: one line per ok",
+    )  # fmt: skip
+    grbl.add_argument("--status-hz", type=float, default=10.0, help="status polling, 5-20 Hz")
+    parser.add_argument(
+        "--start-line", type=int, default=1,
+        help="restart here (a G100 P0 resume point, a cut's M3): XY goes to where the lines "
+        "before it end, then the program carries on",
+    )  # fmt: skip
+    parser.add_argument(
+        "--yes-cycle-start", action="store_true",
+        help="press cycle start at each G200 S1 stop after pierce (no operator)",
+    )  # fmt: skip
     add_dialect_options(parser)
     parser.add_argument("--json", action="store_true")
     return parser
@@ -45,27 +66,53 @@ def _host_port(url: str, scheme: str) -> tuple[str, int]:
     return host, int(port)
 
 
+async def _backend(args: argparse.Namespace) -> MotionBackend:
+    if args.backend == "sim":
+        return SimGantryBackend(*_host_port(args.gantry, "socket://"))
+    if not args.port:
+        raise SystemExit("--backend grbl needs --port (/dev/ttyUSB0 or socket://HOST:PORT)")
+    try:
+        grbl = GrblBackend(
+            args.port, baudrate=args.baud, poll_hz=args.status_hz, streaming=args.streaming
+        )
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
+    await grbl.connect()
+    return grbl
+
+
 async def _send(args: argparse.Namespace) -> int:
     host, port = _host_port(args.broker, "mqtt://")
-    gantry_host, gantry_port = _host_port(args.gantry, "socket://")
     lines = args.program.read_text().splitlines()
     daemon = DaemonClient(
         host, port, base_topic=args.base_topic, board_id=args.board_id, protocol=args.protocol
     )
-    backend = SimGantryBackend(gantry_host, gantry_port)
-    async with daemon.connected():
-        report = await Sender(daemon, backend).run(
-            lines, start_line=args.start_line, dialect=args.dialect, codes=args.codes
-        )
-    await backend.close()
+    backend = await _backend(args)
+    try:
+        async with daemon.connected():
+            sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
+            console = OperatorConsole(sender, interactive=_interactive() and not args.json)
+            report = await console.run_job(
+                lines, start_line=args.start_line, dialect=args.dialect, codes=args.codes
+            )
+    finally:
+        await backend.close()
     if args.json:
         print(json.dumps(report.as_dict()))
     elif report.ok:
-        print(f"done: {report.lines_sent} lines, {report.cuts_started} cuts")
+        pressed = (f", cycle start at line {', '.join(map(str, report.cycle_starts))}"
+                   if report.cycle_starts else "")  # fmt: skip
+        print(f"done: {report.lines_sent} lines, {report.cuts_started} cuts{pressed}")
     else:
         where = f"; resume from line {report.resume_from}" if report.resume_from else ""
         print(f"stopped at line {report.error_line}: {report.error}{where}")
+        if report.restart_line is not None:
+            print(f"restart with --start-line {report.restart_line}")
     return 0 if report.ok else 1
+
+
+def _interactive() -> bool:
+    return sys.stdin.isatty() and sys.stderr.isatty()
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -> int:
@@ -74,6 +121,9 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -
         return asyncio.run(_send(args))
     except aiomqtt.MqttError as exc:
         print(f"{prog}: cannot reach the broker at {args.broker}: {exc}", file=sys.stderr)
+        return 2
+    except BackendError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # the program file, or the motion backend's port
         print(f"{prog}: {exc}", file=sys.stderr)

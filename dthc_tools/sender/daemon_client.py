@@ -75,12 +75,14 @@ class DaemonClient:
         self._unanswered: dict[str, tuple[str, str]] = {}  # transaction: (topic, payload)
         self._event_handlers: list[Callable[[dict[str, Any]], None]] = []
         self._offline_handlers: list[Callable[[], None]] = []
+        self._telemetry_handlers: list[Callable[[dict[str, Any]], None]] = []
         self._task: asyncio.Task[None] | None = None
         self._tasks: set[asyncio.Task[None]] = set()
         self._broker_lost = asyncio.Event()  # set from a connection loss to the reconnect
         self._rng = random.Random()
         self.reconnects = 0
         self.republished = 0  # requests sent again after a reconnect (same transaction)
+        self.notified = 0  # reports published (``notify``)
         # A request published while the daemon is not subscribed would be dropped by the
         # broker: wait for its availability (retained, republished on every reconnect).
         self._online = asyncio.Event()
@@ -106,7 +108,7 @@ class DaemonClient:
         while True:
             try:
                 async with self._new_client() as client:
-                    for leaf in ("response/#", "event", "availability"):
+                    for leaf in ("response/#", "event", "availability", "telemetry"):
                         await client.subscribe(f"{self.root}/{leaf}", qos=1)
                     self._client = client
                     self._broker_lost.clear()
@@ -166,6 +168,10 @@ class DaemonClient:
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         self._event_handlers.append(handler)
 
+    def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None:
+        """Each telemetry point (arc voltage, height, state) as the daemon publishes it."""
+        self._telemetry_handlers.append(handler)
+
     def on_offline(self, handler: Callable[[], None]) -> None:
         """The daemon's availability turned offline (killed, crashed or stopped)."""
         self._offline_handlers.append(handler)
@@ -199,6 +205,10 @@ class DaemonClient:
                 continue
             if message.topic.matches(f"{self.root}/event"):
                 for handler in self._event_handlers:
+                    handler(document)
+                continue
+            if message.topic.matches(f"{self.root}/telemetry"):
+                for handler in self._telemetry_handlers:
                     handler(document)
                 continue
             transaction = str(document.get("transaction"))
@@ -237,6 +247,17 @@ class DaemonClient:
             raise DaemonError(str(response.get("error") or "error"))
         data: dict[str, Any] = response.get("data") or {}
         return data
+
+    async def notify(self, name: str, **args: Any) -> None:
+        """A report, not a command: published at QoS 0 without a transaction, its answer not
+        awaited, never re-sent (a stale ``motion`` speed is worse than none: the daemon
+        counts a missing one as unknown and holds the THC)."""
+        client = self._client
+        if client is None or not self._online.is_set():
+            return
+        with contextlib.suppress(aiomqtt.MqttError):
+            await client.publish(f"{self.root}/request/{name}", json.dumps(args), qos=0)
+        self.notified += 1
 
     async def gcode(
         self,

@@ -14,7 +14,7 @@ re-armed.
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Mapping, Sequence
+from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +58,8 @@ class SendReport:
     error_line: int | None = None
     resume_points: list[int] = field(default_factory=list)  # program line numbers of P0
     paused: list[str] = field(default_factory=list)
+    cut_lines: list[int] = field(default_factory=list)  # program line of each cut start
+    cycle_starts: list[int] = field(default_factory=list)  # the M3 lines released by it
     dialect: str = ""
     warnings: list[str] = field(default_factory=list)
 
@@ -73,24 +75,67 @@ class SendReport:
         earlier = [n for n in self.resume_points if n <= self.error_line]
         return earlier[-1] if earlier else None
 
+    @property
+    def restart_line(self) -> int | None:
+        """Where a restart after an error begins: the last resume point (RosettaCNC G100
+        P0), else the start of the cut the error happened in (PlasmaC's cut recovery)."""
+        if self.error_line is None:
+            return None
+        cuts = [n for n in self.cut_lines if n <= self.error_line]
+        points = [n for n in (self.resume_from, cuts[-1] if cuts else None) if n is not None]
+        return max(points) if points else None
+
     def as_dict(self) -> dict[str, Any]:
         return {
             "ok": self.ok, "lines_sent": self.lines_sent, "plasma_commands": self.plasma_commands,
             "cuts_started": self.cuts_started, "error": self.error, "error_line": self.error_line,
             "resume_points": self.resume_points, "resume_from": self.resume_from,
-            "paused": self.paused, "dialect": self.dialect, "warnings": self.warnings,
+            "restart_line": self.restart_line, "paused": self.paused,
+            "cut_lines": self.cut_lines, "cycle_starts": self.cycle_starts,
+            "dialect": self.dialect, "warnings": self.warnings,
         }  # fmt: skip
 
 
+@dataclass
+class Progress:
+    """What the operator console shows."""
+
+    line: int = 0
+    total_lines: int = 0
+    cut: int = 0
+    total_cuts: int = 0
+    waiting_cycle_start: bool = False
+    operator_paused: bool = False
+    running: bool = False
+
+
 class Sender:
-    def __init__(self, daemon: DaemonClient, backend: MotionBackend) -> None:
+    def __init__(
+        self, daemon: DaemonClient, backend: MotionBackend, *, auto_cycle_start: bool = False
+    ) -> None:
         self.daemon = daemon
         self.backend = backend
+        self.auto_cycle_start = auto_cycle_start  # --yes-cycle-start: tests, remote panels
+        self.progress = Progress()
+        self.report = SendReport()
         self._pause: asyncio.Event = asyncio.Event()
         self._pause_reason = ""
         self.velocity_percent = 100.0  # PlasmaC M67/M68 E3: the machine runs slower
         daemon.on_event(self._on_event)
         daemon.on_offline(self._on_daemon_offline)
+        backend.add_motion_listener(self._on_motion)
+        self._reports: set[asyncio.Task[None]] = set()
+        self.motion_reports = 0
+
+    def _on_motion(self, speed_mm_s: float, state: str) -> None:
+        """The motion controller's measured XY speed, to the daemon's anti-dive (boards
+        without an XY speed input). Fire and forget: the next report is 100 ms away."""
+        self.motion_reports += 1
+        task = asyncio.ensure_future(
+            self.daemon.notify("motion", xy_speed_mm_s=round(speed_mm_s, 2), state=state)
+        )
+        self._reports.add(task)
+        task.add_done_callback(self._reports.discard)
 
     def _on_daemon_offline(self) -> None:
         # Torch and Z are the daemon's: without it, motion must not go on with a cut.
@@ -100,11 +145,65 @@ class Sender:
     def _on_event(self, event: dict[str, Any]) -> None:
         if event.get("cause") == "stop_after_pierce":
             # G200 S1: the pending M3 is answered once the operator presses cycle start.
-            log.warning("waiting_for_cycle_start", reason=event.get("reason"))
+            self.progress.waiting_cycle_start = True
+            log.warning("waiting_for_cycle_start", line=self.progress.line)
+            if self.auto_cycle_start:
+                self._background(self.cycle_start())
             return
         if event.get("type") in ("pause", "arc_lost"):
             self._pause_reason = str(event.get("reason", event.get("type")))
             self._pause.set()
+
+    def _background(self, work: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.ensure_future(work)
+        self._reports.add(task)
+        task.add_done_callback(self._reports.discard)
+
+    # --- the operator's keys ---------------------------------------------------------------
+
+    async def cycle_start(self) -> None:
+        """After a G200 S1 stop: release the pending M3. After a pause: resume."""
+        if self.progress.waiting_cycle_start:
+            self.progress.waiting_cycle_start = False
+            self.report.cycle_starts.append(self.progress.line)
+            log.info("cycle_start", line=self.progress.line)
+            await self.daemon.request("cycle_start")
+        elif self.progress.operator_paused:
+            await self.daemon.request("thc_hold", on=False)
+            await self.backend.resume()
+            self.progress.operator_paused = False
+            log.info("resumed_by_operator", line=self.progress.line)
+
+    async def pause(self) -> None:
+        """Feed hold and THC hold; the program goes on after cycle start."""
+        if self.progress.operator_paused or not self.progress.running:
+            return
+        self.progress.operator_paused = True
+        await self.backend.hold()
+        await self.daemon.request("thc_hold", on=True)
+        log.info("paused_by_operator", line=self.progress.line)
+
+    async def stop(self) -> None:
+        """Torch off and safe height (the daemon's abort: re-arm before the next cut), motion
+        held; the program ends."""
+        self._pause_reason = "stopped by the operator"
+        self._pause.set()
+        await self._hold()
+        await self.daemon.request("abort")
+
+    async def torch(self, volts: float) -> None:
+        """Torch up (+) or down (-): the THC target moves by ``volts``."""
+        await self.daemon.request("torch_up" if volts > 0 else "torch_down", volts=abs(volts))
+
+    async def rearm(self) -> None:
+        """Before a restart: the daemon leaves its fault state, the motion queue is dropped."""
+        try:
+            await self.daemon.request("rearm")
+        except DaemonError as exc:
+            if "nothing to re-arm" not in str(exc):
+                raise
+        await self.backend.clear()
+        await self.backend.resume()
 
     async def run(
         self,
@@ -120,9 +219,24 @@ class Sender:
         the daemon's ``controller.dialect`` when nothing dialect-specific is found);
         ``codes`` maps a shop's own codes to the daemon's (``{"H1": "M667"}``), on top of
         the daemon's ``controller.codes`` table."""
-        report = SendReport()
+        report = self.report = SendReport()
         self._pause.clear()
+        self._pause_reason = ""
         self.velocity_percent = 100.0
+        self.progress = Progress(total_lines=len(lines), running=True)
+        try:
+            return await self._run(lines, start_line, dialect, codes, report)
+        finally:
+            self.progress.running = False
+
+    async def _run(
+        self,
+        lines: Sequence[str],
+        start_line: int,
+        dialect: Dialect | None,
+        codes: Mapping[str, str] | None,
+        report: SendReport,
+    ) -> SendReport:
         try:
             started = await self.daemon.request("program_start")
         except DaemonError as exc:
@@ -134,16 +248,25 @@ class Sender:
         report.dialect = str(dialect)
         shop_codes = started.get("codes")
         table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
+        self.progress.total_cuts = count_cuts(ProgramPlan(lines, dialect, table))
         plan = ProgramPlan(lines, dialect, table)
         self._note_cut_feed(started, plan)
         number = start_line
+        restart = RestartPosition()
         for step in plan.steps():
             number = step.source_line
+            self.progress.line = number
             if number < start_line:
+                restart.skip(step)
+                self.progress.cut += _cuts_in(step, plan)
                 continue
             try:
+                for line in restart.lines():  # once: back to where the skipped lines end
+                    await self.backend.queue(line, source_line=number)
                 await self._step(step, plan, report)
-            except (CommandError, DaemonError, BackendError) as exc:
+            except BackendError as exc:
+                report.error, report.error_line = str(exc), exc.line_number or number
+            except (CommandError, DaemonError) as exc:
                 report.error, report.error_line = str(exc), number
             if self._pause.is_set() and not report.error:
                 report.error, report.error_line = f"paused: {self._pause_reason}", number
@@ -153,8 +276,12 @@ class Sender:
                 log.warning("program_stopped", line=number, error=report.error)
                 report.warnings = plan.warnings
                 return report
-        await self.backend.wait_idle()
-        if self._pause.is_set():
+        try:
+            await self._wait_motion()
+        except BackendError as exc:  # a line refused late (streamed ahead), an alarm
+            report.error, report.error_line = str(exc), exc.line_number or number
+            await self._hold()
+        if self._pause.is_set() and not report.error:
             report.error, report.error_line = f"paused: {self._pause_reason}", number
         report.warnings = plan.warnings
         return report
@@ -168,9 +295,10 @@ class Sender:
     async def _step(self, step: Step, plan: ProgramPlan, report: SendReport) -> None:
         if isinstance(step, Refused):
             raise CommandError("", step.error)
+        number = step.source_line
         if isinstance(step, MotionStep):
             words = tokenize(step.line).words  # the plan has checked every number
-            await self.backend.queue(self._reduced(step.line, words))
+            await self.backend.queue(self._reduced(step.line, words), source_line=number)
             report.lines_sent += 1
             return
         if isinstance(step, DwellStep):
@@ -208,6 +336,8 @@ class Sender:
                 self.velocity_percent = command.percent if command.percent > 0 else 100.0
             if starts_cut(command):
                 report.cuts_started += 1
+                report.cut_lines.append(step.source_line)
+                self.progress.cut += 1
 
     def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
         """The line as the machine runs it: feed scaled by a velocity reduction."""
@@ -234,6 +364,75 @@ class Sender:
             return idle.result()
         idle.cancel()
         return (float("nan"), float("nan"))
+
+
+class RestartPosition:
+    """The motion state the skipped lines of a restart leave: units, distance mode, feed and
+    the XY they end at, so the restart goes there first (``G0``) and carries on modally."""
+
+    def __init__(self) -> None:
+        self.units = 21.0  # G21 mm / G20 inch
+        self.absolute = True
+        self.feed: float | None = None
+        self.x: float | None = None
+        self.y: float | None = None
+        self.pending = False
+
+    def skip(self, step: Step) -> None:
+        if not isinstance(step, MotionStep):
+            return
+        self.pending = True
+        relative_x = relative_y = 0.0
+        for word in tokenize(step.line).words:
+            value = word.value
+            if word.letter == "G" and value in (20.0, 21.0):
+                self.units = value
+            elif word.letter == "G" and value in (90.0, 91.0):
+                self.absolute = value == 90.0
+            elif word.letter == "F":
+                self.feed = value
+            elif word.letter == "X":
+                relative_x = value
+            elif word.letter == "Y":
+                relative_y = value
+        has = {w.letter for w in tokenize(step.line).words}
+        if self.absolute:
+            self.x = relative_x if "X" in has else self.x
+            self.y = relative_y if "Y" in has else self.y
+        else:
+            self.x = (self.x or 0.0) + relative_x
+            self.y = (self.y or 0.0) + relative_y
+
+    def lines(self) -> list[str]:
+        """The lines that restore the state (once; then nothing)."""
+        if not self.pending:
+            return []
+        self.pending = False
+        out = [f"G{self.units:g} G90"]
+        target = "".join(f" {axis}{v:.4f}" for axis, v in (("X", self.x), ("Y", self.y))
+                         if v is not None)  # fmt: skip
+        if target:
+            out.append(f"G0{target}")
+        if self.feed is not None:
+            out.append(f"F{self.feed:g}")
+        if not self.absolute:
+            out.append("G91")
+        return out
+
+
+def _cuts_in(step: Step, plan: ProgramPlan) -> int:
+    if not isinstance(step, DaemonStep) or step.feed_note:
+        return 0
+    try:
+        parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
+    except CommandError:
+        return 0
+    return sum(1 for command in parsed.commands if starts_cut(command))
+
+
+def count_cuts(plan: ProgramPlan) -> int:
+    """The cuts a program will start (for the progress display)."""
+    return sum(_cuts_in(step, plan) for step in plan.steps())
 
 
 def starts_cut(command: Command) -> bool:

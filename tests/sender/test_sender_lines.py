@@ -34,6 +34,12 @@ class FakeDaemon:
     def on_offline(self, handler: Callable[[], None]) -> None:
         pass
 
+    def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None:
+        pass
+
+    async def notify(self, name: str, **args: Any) -> None:
+        pass
+
     async def gcode(
         self,
         line: str,
@@ -53,8 +59,11 @@ class FakeBackend:
     def __init__(self) -> None:
         self.queued: list[str] = []
 
-    async def queue(self, line: str) -> None:
+    async def queue(self, line: str, *, source_line: int | None = None) -> None:
         self.queued.append(line)
+
+    def add_motion_listener(self, listener: Callable[[float, str], None]) -> None:
+        pass
 
     async def wait_idle(self) -> tuple[float, float]:
         return 0.0, 0.0
