@@ -34,3 +34,20 @@ def test_demo_json_runs_the_masso_sample_safely(tmp_path: Path) -> None:
     assert summary["height_max_err_mm"] < 0.5
     assert summary["torch_on_at_exit"] is False
     assert plot.stat().st_size > 10_000
+
+
+def test_demo_runs_a_g200_s1_program_to_its_end_pressing_cycle_start(tmp_path: Path) -> None:
+    """MASSO's stop after pierce: the demo has no operator, so it presses cycle start at each
+    stop (``--yes-cycle-start``) and says where; without it the program would wait forever."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "dthc_bridge", "demo", "--json", "--program", "masso_s1",
+         "--plot", str(tmp_path / "demo.png")],
+        capture_output=True, text=True, timeout=120, check=False, preexec_fn=die_with_parent(),
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["cycle_starts"] == [8, 17]  # the two M03 lines of masso_s1.ngc
+    assert summary["sender"]["cuts_started"] == 2
+    assert summary["sender"]["ok"]
+    assert summary["safety_violations"] == 0
+    assert summary["torch_on_at_exit"] is False

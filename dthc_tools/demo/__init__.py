@@ -30,6 +30,7 @@ PROGRAMS = {
     "masso_sample": ("masso_warped", 3.5),
     "rosetta_g100": ("warped_sheet", 1.5),
     "holes_corners": ("flat_clean", 1.5),
+    "masso_s1": ("flat_clean", 1.5),
 }
 TELEMETRY_HZ = 50.0
 
@@ -89,6 +90,7 @@ def run_demo(
     summary["scenario"] = run.scenario
     summary["dialect"] = result.report.dialect
     summary["warnings"] = result.report.warnings
+    summary["cycle_starts"] = result.report.cycle_starts  # program lines: the S1 stops
     summary["plot"] = str(plot)
     ok = (
         summary["safety_violations"] == 0
@@ -113,6 +115,9 @@ def _print(s: dict[str, Any]) -> None:
         print(f"{c['cut']:>4} {c['arc_on_s']:>9.2f} {target:>9} {c['height_rms_mm']:>8.3f} "
               f"{c['height_max_err_mm']:>8.3f} {c['dives']:>6} {c['thc_locked_s']:>9.2f} "
               f"{c['thc_active_s']:>9.2f}")  # fmt: skip
+    if s["cycle_starts"]:
+        print(f"cycle start pressed at line(s) {', '.join(map(str, s['cycle_starts']))} "
+              "(G200 S1: stop after pierce)")  # fmt: skip
     errors = s["errors"] or "none"
     print(f"pierces {s['pierces']}, completed cuts {s['completed_cuts']}, "
           f"safety violations {s['safety_violations']}, errors {errors}")  # fmt: skip

@@ -287,7 +287,8 @@ class Stack:
         backend = SimGantryBackend("127.0.0.1", self.gantry_port)
         async with daemon.connected():
             try:
-                return await Sender(daemon, backend).run(
+                # No operator at a demo: cycle start is pressed at each G200 S1 stop.
+                return await Sender(daemon, backend, auto_cycle_start=True).run(
                     lines, start_line=start_line, dialect=dialect, codes=codes
                 )
             finally:
