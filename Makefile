@@ -14,12 +14,14 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# The integration tests run a real mosquitto; install it where it is missing.
+# The integration tests run a real mosquitto, and the README's worked example its standard
+# clients (mosquitto_pub, mosquitto_sub); install them where they are missing.
 broker:
-	@command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto || { \
-	  echo "installing mosquitto (apt-get)"; \
+	@{ command -v mosquitto >/dev/null 2>&1 || test -x /usr/sbin/mosquitto; } && \
+	  command -v mosquitto_pub >/dev/null 2>&1 || { \
+	  echo "installing mosquitto and mosquitto-clients (apt-get)"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
-	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq mosquitto >/dev/null; }
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq mosquitto mosquitto-clients >/dev/null; }
 
 # Unit checks run systemd-analyze on the service file; install it where it is missing.
 systemd-tools:
