@@ -30,6 +30,8 @@ from dthc_bridge.controller.dialect import Dialect
 
 from ..procs import die_with_parent
 from ..sender import DaemonClient, Sender, SendReport, SimGantryBackend
+from ..sender.backend import MotionBackend
+from ..sender.grbl_backend import GrblBackend
 
 __all__ = ["Stack", "StackOptions", "StackResult"]
 
@@ -55,6 +57,10 @@ class StackOptions:
     daemon_env: dict[str, str] = field(default_factory=dict)
     materials_file: Path | None = None  # the daemon's material library (QtPlasmaC format)
     controller: dict[str, object] = field(default_factory=dict)  # more [controller] keys
+    # "grbl": X and Y on an emulated grbl (its own process on a pty) mirrored into the mock's
+    # plant; the mock board then has no XY speed input and the sender reports the speed.
+    motion: str = "sim"
+    grbl_args: tuple[str, ...] = ()
 
 
 @dataclass
@@ -149,6 +155,9 @@ class Stack:
         self.mock: subprocess.Popen[str] | None = None
         self.daemon: subprocess.Popen[bytes] | None = None
         self.gantry_port = 0
+        self.grbl: subprocess.Popen[str] | None = None
+        self.grbl_pty = self.workdir / "grbl0"
+        self.last_backend: MotionBackend | None = None  # the last send()'s, for its figures
         self.telemetry: list[dict[str, Any]] = []
         self.events: list[dict[str, Any]] = []
         self._watch: asyncio.Task[None] | None = None
@@ -163,6 +172,8 @@ class Stack:
         if not self.broker_shared:
             await self.broker.start()
         self._start_mock()
+        if self.options.motion == "grbl":
+            self._start_grbl()
         self._start_daemon()
         self._watch = asyncio.create_task(self._observe(), name="stack-observer")
         await self._wait_online()
@@ -173,10 +184,12 @@ class Stack:
             self._watch.cancel()
             with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
                 await self._watch
-        for proc in (self.daemon, self.mock):
+        for proc in (self.daemon, self.mock, self.grbl):
             if proc is not None and proc.poll() is None:
                 proc.kill()
                 await asyncio.to_thread(proc.wait, 5)
+        if self.grbl is not None and self.grbl.stdout is not None:
+            self.grbl.stdout.close()
         if self.mock is not None and self.mock.stdout is not None:
             self.mock.stdout.close()
         for handle in self._logs:
@@ -189,6 +202,7 @@ class Stack:
             [sys.executable, "-m", "mock_device", "--pty", str(self.pty),
              "--scenario", self.options.scenario, "--seed", str(self.options.seed),
              "--truth", str(self.truth), "--gantry-listen", "socket://127.0.0.1:0",
+             *(("--no-xy-speed",) if self.options.motion == "grbl" else ()),
              *self.options.mock_args],
             stdout=subprocess.PIPE, stderr=self._log("mock.log"), text=True,
             preexec_fn=die_with_parent(),
@@ -198,6 +212,23 @@ class Stack:
         if not ready or ready[0] != "READY":
             raise RuntimeError("the mock board did not start: see mock.log")
         self.gantry_port = int(next(w for w in ready if w.startswith("gantry=")).split("=")[1])
+
+    def _start_grbl(self) -> None:
+        self.grbl = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
+            [sys.executable, "-m", "dthc_tools.grbl_emu", "--pty", str(self.grbl_pty),
+             "--plant", f"socket://127.0.0.1:{self.gantry_port}", *self.options.grbl_args],
+            stdout=subprocess.PIPE, stderr=self._log("grbl.log"), text=True,
+            preexec_fn=die_with_parent(),
+        )  # fmt: skip
+        assert self.grbl.stdout is not None
+        ready = self.grbl.stdout.readline().split()
+        if not ready or ready[0] != "READY":
+            raise RuntimeError("the grbl emulator did not start: see grbl.log")
+
+    def motion_backend(self) -> MotionBackend:
+        if self.options.motion == "grbl":
+            return GrblBackend(str(self.grbl_pty))
+        return SimGantryBackend("127.0.0.1", self.gantry_port)
 
     def _start_daemon(self) -> None:
         config = self.workdir / "config.toml"
@@ -284,7 +315,10 @@ class Stack:
     ) -> SendReport:
         """Run the sender over ``lines``; ``daemon`` must not be connected yet."""
         daemon = daemon or self.daemon_client()
-        backend = SimGantryBackend("127.0.0.1", self.gantry_port)
+        backend = self.motion_backend()
+        if isinstance(backend, GrblBackend):
+            await backend.connect()
+        self.last_backend = backend
         async with daemon.connected():
             try:
                 # No operator at a demo: cycle start is pressed at each G200 S1 stop.
@@ -296,7 +330,9 @@ class Stack:
 
     async def reset_motion(self) -> None:
         """What an operator does before restarting after an error: clear and release."""
-        backend = SimGantryBackend("127.0.0.1", self.gantry_port)
+        backend = self.motion_backend()
+        if isinstance(backend, GrblBackend):
+            await backend.connect()
         try:
             await backend.clear()
             await backend.resume()

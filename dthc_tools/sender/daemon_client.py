@@ -86,6 +86,7 @@ class DaemonClient:
         # A request published while the daemon is not subscribed would be dropped by the
         # broker: wait for its availability (retained, republished on every reconnect).
         self._online = asyncio.Event()
+        self._gone = asyncio.Event()  # its will came and no broker restart explains it
 
     @contextlib.asynccontextmanager
     async def connected(self) -> AsyncIterator[DaemonClient]:
@@ -178,6 +179,7 @@ class DaemonClient:
 
     def _went_offline(self) -> None:
         """Nobody will answer what is pending: fail it now, not after the timeout."""
+        self._gone.set()
         for waiter in self._waiting.values():
             if not waiter.done():
                 waiter.set_exception(DaemonError("the daemon went offline"))
@@ -194,6 +196,7 @@ class DaemonClient:
                 continue
             if message.topic.matches(f"{self.root}/availability"):
                 if document.get("state") == "online":
+                    self._gone.clear()
                     if self._unanswered:
                         # The daemon is (back) on the broker: what it may have missed is sent
                         # again; a repeat is answered from its cache, never run twice.
@@ -217,15 +220,30 @@ class DaemonClient:
             if waiter is not None and not waiter.done():
                 waiter.set_result(document)
 
+    async def _wait_online(self, name: str) -> None:
+        """Until the daemon is online; a daemon that died meanwhile fails it at once."""
+        if self._online.is_set():
+            return
+        online = asyncio.ensure_future(self._online.wait())
+        gone = asyncio.ensure_future(self._gone.wait())
+        try:
+            await asyncio.wait({online, gone}, timeout=self.timeout_s,
+                               return_when=asyncio.FIRST_COMPLETED)  # fmt: skip
+        finally:
+            online.cancel()
+            gone.cancel()
+        if self._online.is_set():
+            return
+        if self._gone.is_set():
+            raise DaemonError(f"{name}: the daemon went offline")
+        raise DaemonError(f"{name}: the daemon is not online")
+
     async def request(self, name: str, **args: Any) -> dict[str, Any]:
         """Publish a request, wait for its response; DaemonError on an error response.
 
         A broker restart meanwhile is ridden out: the request is published again, with
         the same transaction, once the connection is back."""
-        try:
-            await asyncio.wait_for(self._online.wait(), self.timeout_s)
-        except TimeoutError:
-            raise DaemonError(f"{name}: the daemon is not online") from None
+        await self._wait_online(name)
         transaction = f"{self._run_id}-{next(self._ids)}"
         future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
         self._waiting[transaction] = future

@@ -293,6 +293,8 @@ class Sender:
             log.error("hold_failed", error=str(exc))
 
     async def _step(self, step: Step, plan: ProgramPlan, report: SendReport) -> None:
+        if self._pause.is_set():
+            return  # paused (a fault, the daemon gone): nothing more goes out, not even a note
         if isinstance(step, Refused):
             raise CommandError("", step.error)
         number = step.source_line

@@ -689,6 +689,9 @@ def test_requests_become_commands(name: str, args: dict[str, object], expected: 
         ("velocity_reduction", {}, "velocity_reduction percent"),
         ("velocity_reduction", {"percent": 101}, "velocity_reduction percent"),
         ("velocity_reduction", {"percent": -5}, "velocity_reduction percent"),
+        ("thc_hold", {}, "thc_hold on"),
+        ("thc_hold", {"on": 1}, "thc_hold on"),
+        ("abort", {"now": True}, "abort now"),
     ],
 )
 def test_bad_requests_name_the_argument(name: str, args: dict[str, object], word: str) -> None:
@@ -708,4 +711,6 @@ def test_request_names_are_published() -> None:
         "velocity_reduction",
         "rearm",
         "ohmic_test",
+        "thc_hold",
+        "abort",
     } == REQUEST_NAMES
