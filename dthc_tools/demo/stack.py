@@ -356,6 +356,9 @@ class Stack:
         except subprocess.TimeoutExpired:
             code = None
         exit_s = time.monotonic() - t0
+        if self.grbl is not None:  # its exit line (stats) goes to grbl.log
+            self.grbl.send_signal(signal.SIGTERM)
+            await asyncio.to_thread(self.grbl.wait, 10)
         self.mock.send_signal(signal.SIGTERM)
         await asyncio.to_thread(self.mock.wait, 10)
         mock_exit: dict[str, Any] = {}

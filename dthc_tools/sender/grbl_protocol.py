@@ -237,8 +237,9 @@ def is_banner(line: str) -> bool:
 
 class CharCounter:
     """Character counting (grbl's own recommended streaming): a line may be sent while the
-    bytes of the unacknowledged lines, newlines included, fit the receive buffer. Each
-    ``ok`` or ``error`` acknowledges the oldest line."""
+    bytes of the unacknowledged lines, newlines included, fit the receive buffer, which
+    holds one byte less than its size (a ring buffer: 127 of 128). Each ``ok`` or
+    ``error`` acknowledges the oldest line."""
 
     def __init__(self, rx_buffer: int) -> None:
         self.rx_buffer = rx_buffer
@@ -246,7 +247,7 @@ class CharCounter:
         self.used = 0
 
     def fits(self, size: int) -> bool:
-        return self.used + size <= self.rx_buffer
+        return self.used + size < self.rx_buffer
 
     def sent(self, size: int) -> None:
         self._in_flight.append(size)
