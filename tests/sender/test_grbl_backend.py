@@ -1,0 +1,195 @@
+"""The grbl backend against the emulated grbl as its own process on a pty: identification,
+character counting, ok/error/ALARM, hold/resume/clear, and what never reaches grbl."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import signal
+import subprocess
+import sys
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from dthc_tools.procs import die_with_parent
+from dthc_tools.sender.backend import BackendError
+from dthc_tools.sender.grbl_backend import GrblBackend
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
+
+
+class Grbl:
+    """One emulator process; ``stats()`` stops it and returns its exit figures."""
+
+    def __init__(self, tmp_path: Path, *args: str) -> None:
+        self.pty = tmp_path / "grbl0"
+        self.log = tmp_path / "grbl.log"
+        self._log = self.log.open("w")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "dthc_tools.grbl_emu", "--pty", str(self.pty), *args],
+            stdout=subprocess.PIPE, stderr=self._log, text=True,
+            preexec_fn=die_with_parent(),
+        )  # fmt: skip
+        assert self.proc.stdout is not None
+        assert self.proc.stdout.readline().startswith("READY")
+
+    async def stats(self) -> dict[str, Any]:
+        self.proc.send_signal(signal.SIGTERM)
+        await asyncio.to_thread(self.proc.wait, 10)
+        for line in self.log.read_text().splitlines():
+            if '"event": "exit"' in line:
+                exit_line: dict[str, Any] = json.loads(line)
+                return exit_line
+        raise AssertionError("no exit line")
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(5)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        self._log.close()
+
+
+@pytest.fixture
+async def grbl(tmp_path: Path) -> AsyncIterator[Callable[..., Grbl]]:
+    started: list[Grbl] = []
+
+    def start(*args: str) -> Grbl:
+        started.append(Grbl(tmp_path, *args))
+        return started[-1]
+
+    yield start
+    for emulator in started:
+        emulator.kill()
+
+
+async def connected(emulator: Grbl, **kwargs: Any) -> GrblBackend:
+    backend = GrblBackend(str(emulator.pty), **kwargs)
+    await backend.connect()
+    return backend
+
+
+SQUARES = [f"G1 X{x + 10:.3f} Y{y + 10:.3f} F6000" for x in range(0, 100, 10) for y in (0, 10)]
+
+
+async def test_classic_grbl_is_identified_and_streamed_by_counting(grbl: Any) -> None:
+    emulator = grbl()
+    backend = await connected(emulator)
+    assert backend.info.banner.startswith("Grbl 1.1f")
+    assert (backend.info.planner_blocks, backend.info.rx_buffer) == (15, 128)
+    speeds: list[tuple[float, str]] = []
+    backend.add_motion_listener(lambda speed, state: speeds.append((speed, state)))
+    for n, line in enumerate(["G21 G90 (metric)", *SQUARES], start=1):
+        await backend.queue(line, source_line=n)
+    assert await backend.wait_idle() == pytest.approx((100.0, 20.0))
+    await backend.close()
+    figures = backend.figures
+    stats = await emulator.stats()
+    assert stats["rx_overflow"] == 0
+    assert stats["ok"] == stats["lines"] == 2 + len(SQUARES)  # $I and the program
+    assert stats["z_words_received"] == stats["spindle_words_received"] == 0
+    assert 80 < figures.max_in_flight_bytes < 128  # lines really were streamed ahead
+    assert any(state == "Run" and speed > 50.0 for speed, state in speeds)
+
+
+async def test_grblhal_reports_its_larger_buffer_and_sync_mode_sends_one_at_a_time(
+    grbl: Any,
+) -> None:
+    emulator = grbl("--flavor", "grblhal")
+    backend = await connected(emulator, streaming="sync")
+    assert backend.info.is_grblhal
+    assert (backend.info.planner_blocks, backend.info.rx_buffer) == (35, 1024)
+    for line in SQUARES[:6]:
+        await backend.queue(line)
+    await backend.wait_idle()
+    longest = max(len(line.replace(" ", "")) + 1 for line in SQUARES[:6])
+    assert backend.figures.max_in_flight_bytes == longest
+    await backend.close()
+    assert (await emulator.stats())["rx_overflow"] == 0
+
+
+async def test_a_refused_line_holds_the_motion_and_names_the_line_and_the_reason(
+    grbl: Any,
+) -> None:
+    emulator = grbl()
+    backend = await connected(emulator)
+    await backend.queue("G21 G90 G1 X50 Y0 F3000", source_line=1)
+    await backend.queue("G38.9 X60", source_line=2)  # not a grbl command: error:20
+    await backend.queue("G1 X200 Y0", source_line=3)  # streamed behind it: must not run on
+    with pytest.raises(BackendError) as info:
+        await backend.wait_idle()
+    assert info.value.line_number == 2
+    assert "error:20" in str(info.value)
+    assert "G38.9X60" in str(info.value)
+    assert "an unsupported or invalid G-code command" in str(info.value)
+    await asyncio.sleep(0.3)
+    assert backend.status is not None
+    assert backend.status.state == "Hold"  # held at once, not run to X200
+    await backend.clear()  # hold complete: no ALARM:3
+    assert backend.status.state == "Idle"
+    await backend.close()
+    stats = await emulator.stats()
+    assert stats["alarms"] == {}
+    assert stats["x_mm"] < 200.0
+
+
+async def test_z_and_spindle_words_never_reach_grbl(grbl: Any) -> None:
+    emulator = grbl()
+    backend = await connected(emulator)
+    for line, word in (("G0 X1 Z5", "Z words"), ("M3 S1000", "M3"), ("G1 X2 S300 F100", "S300")):
+        with pytest.raises(BackendError, match=word):
+            await backend.queue(line, source_line=7)
+    await backend.close()
+    stats = await emulator.stats()
+    assert stats["z_words_received"] == stats["spindle_words_received"] == 0
+
+
+async def test_hold_stops_within_the_next_status_report_and_resume_goes_on(grbl: Any) -> None:
+    """A daemon pause holds the motion within one status period: the ``!`` goes out at
+    once, so the first report after it already shows the hold."""
+    emulator = grbl()
+    backend = await connected(emulator)
+    await backend.queue("G21 G90 G1 X300 Y0 F3000")
+    for _ in range(100):  # the status poll sees it running
+        if backend.status is not None and backend.status.state == "Run":
+            break
+        await asyncio.sleep(0.01)
+    seq = backend.figures.status_reports
+    states: list[str] = []
+    backend.add_motion_listener(lambda _speed, state: states.append(state))
+    await backend.hold()
+    assert states[0] == "Hold", states
+    assert backend.figures.status_reports > seq
+    held_at = backend.position
+    await asyncio.sleep(0.3)
+    assert backend.position == held_at
+    await backend.resume()
+    assert await backend.wait_idle() == pytest.approx((300.0, 0.0))
+    await backend.close()
+
+
+async def test_a_soft_limit_alarm_stops_the_program_and_a_clear_reports_it(grbl: Any) -> None:
+    emulator = grbl("--max-travel", "500,500")
+    backend = await connected(emulator)
+    await backend.queue("G21 G90 G0 X900 Y10", source_line=4)
+    with pytest.raises(BackendError, match="ALARM:2"):
+        await backend.wait_idle()
+    with pytest.raises(BackendError, match=r"ALARM:2|alarm"):
+        await backend.queue("G0 X1")
+    await backend.close()
+
+
+async def test_a_controller_in_alarm_is_refused_at_connect(grbl: Any) -> None:
+    emulator = grbl()
+    first = await connected(emulator)
+    await first.queue("G21 G90 G1 X300 Y0 F3000")
+    await asyncio.sleep(0.3)
+    first._write(b"\x18")  # a reset in motion: ALARM:3, locked until $X
+    await asyncio.sleep(0.3)
+    await first.close()
+    with pytest.raises(BackendError, match=r"alarm.*\$X"):
+        await connected(emulator)
