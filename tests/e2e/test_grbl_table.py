@@ -8,7 +8,9 @@ reduction to 40 %): the THC must lock when the measured speed drops and work at 
 
 from __future__ import annotations
 
+import asyncio
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +18,7 @@ import pytest
 
 from dthc_tools.demo import Stack, StackOptions
 from dthc_tools.demo.summary import summarize
+from dthc_tools.procs import die_with_parent
 from dthc_tools.sender.grbl_backend import GrblBackend
 from tests.e2e.test_end_to_end import assert_clean
 
@@ -117,3 +120,30 @@ async def test_a_grbl_table_cuts_with_the_anti_dive_on_the_measured_speed(
     assert '"z_words_received": 0' in grbl_exit
     assert '"spindle_words_received": 0' in grbl_exit
     assert '"rx_overflow": 0' in grbl_exit
+
+
+async def test_send_drives_grbl_from_the_command_line_through_a_g200_s1_program(
+    tmp_path: Path,
+) -> None:
+    """As a table owner runs it: ``dthc-bridge send --backend grbl --port PTY
+    --yes-cycle-start``, a MASSO program that stops after each pierce runs to its end."""
+    program = Path(__file__).parents[2] / "dthc_tools" / "demo" / "programs" / "masso_s1.ngc"
+    options = StackOptions(tmp_path, broker="mosquitto", motion="grbl")
+    async with Stack(options) as stack:
+        send = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "dthc_bridge", "send", str(program), "--backend", "grbl",
+            "--port", str(stack.grbl_pty), "--broker", f"mqtt://127.0.0.1:{stack.broker.port}",
+            "--base-topic", stack.base, "--protocol", stack.broker.protocol,
+            "--yes-cycle-start", "--json",
+            stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+            preexec_fn=die_with_parent(),
+        )  # fmt: skip
+        out, err = await asyncio.wait_for(send.communicate(), 120)
+        result = await stack.finish()
+    assert send.returncode == 0, out.decode() + err.decode()[-2000:]
+    report = json.loads(out)
+    assert report["ok"]
+    assert report["cuts_started"] == 2
+    assert report["cycle_starts"] == [8, 17]
+    assert result.mock_exit["torch_on"] is False
+    assert result.mock_exit["violations"] == {}

@@ -35,3 +35,26 @@ def test_a_missing_program_file_is_named(
     missing = tmp_path / "nope.ngc"
     assert cli.main([str(missing)]) == 2
     assert str(missing) in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--backend", "grbl"], "--backend grbl needs --port"),
+        (["--backend", "grbl", "--port", "/dev/nonexistent-grbl"], "/dev/nonexistent-grbl"),
+        (["--backend", "grbl", "--port", "/dev/null", "--status-hz", "50"], "use 5-20 Hz"),
+    ],
+)
+def test_a_bad_grbl_backend_is_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    program = tmp_path / "part.ngc"
+    program.write_text("G0 X1\n")
+    try:
+        code: object = cli.main([str(program), *args])
+    except SystemExit as exc:  # argparse-style: the message is the exit code
+        code = exc.code
+    out = capsys.readouterr()
+    assert code not in (0, None)
+    assert message in str(code) + out.err
+    assert "Traceback" not in out.err
