@@ -6,6 +6,7 @@ Keys (single keys, no Enter, when the terminal is interactive):
     p  pause: feed hold and THC hold (c resumes)
     s  stop: torch off, safe height, motion held; the program ends
     +  torch up 1 V       -  torch down 1 V
+    >  feed +10 %         <  feed -10 %         =  feed 100 %   (grbl's feed override)
     r  after an error: re-arm, then restart from the last resume point (G100 P0) or the
        start of the cut the error happened in
     q  after an error: quit
@@ -36,7 +37,8 @@ __all__ = ["KEYS", "OperatorConsole"]
 
 log = structlog.get_logger("dthc_tools.sender.console")
 
-KEYS = "c cycle start · p pause · s stop · +/- torch 1 V · r re-arm+restart · q quit"
+KEYS = "c cycle start · p pause · s stop · +/- torch 1 V · >/</= feed · r re-arm+restart · q quit"
+FEED_KEYS = {">": "+10", "<": "-10", "=": "reset"}
 BAR = 20
 TORCH_STEP_V = 1.0
 
@@ -81,6 +83,8 @@ class OperatorConsole:
                 await sender.stop()
             elif key in "+-" and key:
                 await sender.torch(TORCH_STEP_V if key == "+" else -TORCH_STEP_V)
+            elif key in FEED_KEYS:
+                sender.feed_override(FEED_KEYS[key])
             else:
                 self._keys.put_nowait(key)  # r / q: the job loop's, after an error
         except (DaemonError, BackendError) as exc:

@@ -37,6 +37,7 @@ from .grbl_protocol import (
     CYCLE_START,
     FEED_HOLD,
     FEED_OVERRIDE,
+    JOG_CANCEL,
     SOFT_RESET,
     STATUS_QUERY,
     CharCounter,
@@ -345,6 +346,10 @@ class GrblBackend:
 
     async def clear(self) -> None:
         """Drop what is queued: hold first if moving (no ALARM:3), soft reset, re-sync."""
+        if self.status is not None and self.status.state == "Jog":
+            self._write(JOG_CANCEL)  # a jog is cancelled, not held
+            await self._until(lambda: self.status is not None and self.status.state != "Jog",
+                              ANSWER_TIMEOUT_S, "the jog did not stop")  # fmt: skip
         if self.status is not None and self.status.state in MOVING:
             await self.hold()
         banners = self._banners

@@ -141,6 +141,7 @@ class Sender:
         # Torch and Z are the daemon's: without it, motion must not go on with a cut.
         self._pause_reason = "the daemon went offline"
         self._pause.set()
+        self._background(self._hold())  # now: the loop may be waiting for buffer room
 
     def _on_event(self, event: dict[str, Any]) -> None:
         if event.get("cause") == "stop_after_pierce":
@@ -153,6 +154,9 @@ class Sender:
         if event.get("type") in ("pause", "arc_lost"):
             self._pause_reason = str(event.get("reason", event.get("type")))
             self._pause.set()
+            # Held now, within one status period, not when the loop next looks: it may be
+            # waiting for room in the controller's buffer while grbl runs what it has.
+            self._background(self._hold())
 
     def _background(self, work: Coroutine[Any, Any, None]) -> None:
         task = asyncio.ensure_future(work)
@@ -190,6 +194,13 @@ class Sender:
         self._pause.set()
         await self._hold()
         await self.daemon.request("abort")
+
+    def feed_override(self, step: str) -> None:
+        """``+10``/``-10``/``reset``: the motion controller's feed override, when it has one."""
+        override = getattr(self.backend, "feed_override", None)
+        if override is None:
+            raise BackendError("this motion backend has no feed override")
+        override(step)
 
     async def torch(self, volts: float) -> None:
         """Torch up (+) or down (-): the THC target moves by ``volts``."""

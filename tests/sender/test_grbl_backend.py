@@ -193,3 +193,22 @@ async def test_a_controller_in_alarm_is_refused_at_connect(grbl: Any) -> None:
     await first.close()
     with pytest.raises(BackendError, match=r"alarm.*\$X"):
         await connected(emulator)
+
+
+async def test_the_feed_override_keys_reach_grbl_as_real_time_bytes(grbl: Any) -> None:
+    emulator = grbl()
+    backend = await connected(emulator)
+    for step in ("+10", "+10", "-1"):
+        backend.feed_override(step)
+    for _ in range(50):
+        await asyncio.sleep(0.05)
+        if backend.status is not None and backend.status.overrides == (119, 100, 100):
+            break
+    assert backend.status is not None
+    assert backend.status.overrides == (119, 100, 100)
+    backend.feed_override("reset")
+    await asyncio.sleep(0.3)
+    report = backend.status
+    assert report.overrides is not None
+    assert report.overrides[0] == 100
+    await backend.close()

@@ -178,3 +178,25 @@ def test_the_status_line_shows_progress(line: int) -> None:
     assert " 1.50 mm" in text
     assert "cutting" in text
     assert text.count("#") == round(line / 12 * 20)
+
+
+async def test_a_feed_key_without_a_feed_override_says_so() -> None:
+    sender = Sender(cast(DaemonClient, FakeDaemon()), FakeBackend())
+    console = OperatorConsole(sender, out=io.StringIO(), interactive=False)
+    await console.press(">")
+    assert console.messages == [">: this motion backend has no feed override"]
+
+
+async def test_a_daemon_pause_holds_the_motion_at_once_not_when_the_loop_looks() -> None:
+    """The loop may wait for room in grbl's buffer for seconds: the hold must not."""
+    daemon, backend = S1Daemon(), FakeBackend()
+    held = asyncio.Event()
+
+    async def hold() -> None:
+        held.set()
+
+    backend.hold = hold  # type: ignore[method-assign]
+    Sender(cast(DaemonClient, daemon), backend)
+    for handler in daemon.handlers:
+        handler({"type": "arc_lost", "reason": "arc lost"})
+    await asyncio.wait_for(held.wait(), 1.0)
