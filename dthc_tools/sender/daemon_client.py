@@ -83,6 +83,7 @@ class DaemonClient:
         self.reconnects = 0
         self.republished = 0  # requests sent again after a reconnect (same transaction)
         self.notified = 0  # reports published (``notify``)
+        self.outages_s: list[float] = []  # connection lost -> subscribed again, per reconnect
         # A request published while the daemon is not subscribed would be dropped by the
         # broker: wait for its availability (retained, republished on every reconnect).
         self._online = asyncio.Event()
@@ -115,6 +116,7 @@ class DaemonClient:
                     self._broker_lost.clear()
                     if first.done():
                         self.reconnects += 1
+                        self.outages_s.append(round(loop.time() - lost_at, 3))
                         log.info(
                             "broker_reconnected", attempts=failures,
                             down_s=round(loop.time() - lost_at, 3),

@@ -9,6 +9,7 @@ reference sender in this process. Counted on the mock board: pierces, one per M3
 from __future__ import annotations
 
 import asyncio
+import json
 import time
 from pathlib import Path
 
@@ -78,6 +79,13 @@ async def test_broker_restarts_with_m3_pending_and_mid_cut_every_command_runs_on
     assert summary["pierces"] == 3  # on the mock board: no M3 lost, none run twice
     assert summary["completed_cuts"] == 3
     assert summary["safety_violations"] == 0
+    # Every plasma command of the program executed once: T112 M6, G200, and per cut M3,
+    # M667, M666, M5 (the daemon's answers counted by the sender, the pierces by the board).
+    assert report.plasma_commands == 2 + 4 * 3
+    print(json.dumps({"broker_restart": {
+        "program_plasma_commands": 2 + 4 * 3, "executed": report.plasma_commands,
+        "pierces_on_board": summary["pierces"], "reconnects": client.reconnects,
+        "republished": client.republished, "outages_s": client.outages_s}}))  # fmt: skip
     assert client.reconnects == 2
     assert client.republished >= 1  # at least the pending M3 went again
     assert summary["torch_on_at_exit"] is False
