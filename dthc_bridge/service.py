@@ -26,7 +26,7 @@ import firmware_protocol as fp
 
 from .board import BoardClient, Telemetry
 from .controller import actions as act
-from .controller.commands import Abort, Command, CommandError, CycleStart
+from .controller.commands import Abort, Command, CommandError, CycleStart, ThcHold
 from .controller.dialect import Dialect
 from .controller.gcode import parse_host_motion, parse_line, parse_request
 from .controller.plasma import PlasmaController
@@ -61,10 +61,10 @@ TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers 
 EventListener = Callable[[ControllerEvent], None]
 MATERIAL_REQUESTS = frozenset({"materials", "material_get", "material_set", "material_delete"})
 _ENVELOPE = ("transaction", "deadline_ms")
-HOST_SPEED_STALE_S = 0.35
+HOST_SPEED_STALE_S = 0.45
 """A sender's ``motion`` report counts this long (board time): it polls its motion
-controller at 5-20 Hz, so this covers one missed report at 10 Hz; older counts as no speed
-(THC locked, ``no_speed``)."""
+controller at 5-20 Hz, so this covers two report periods at 5 Hz (one missed report at 10
+Hz); older counts as no speed (THC locked, ``no_speed``)."""
 
 
 class ControllerService:
@@ -198,7 +198,8 @@ class ControllerService:
         if self._host_speed is None:
             return None
         speed, at_s = self._host_speed
-        return speed if t_s - at_s <= HOST_SPEED_STALE_S else None
+        # Negative age: the board rebooted and its clock started again; not fresh.
+        return speed if 0.0 <= t_s - at_s <= HOST_SPEED_STALE_S else None
 
     def _material_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
         """``materials``, ``material_get``/``_set``/``_delete`` {number, ...}: the library,
@@ -300,10 +301,10 @@ class ControllerService:
     # --- commands --------------------------------------------------------------------------
 
     async def _execute(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult:
-        if isinstance(command, CycleStart | Abort):
-            # Cycle start answers the M3 that waits for it (G200 S1), and a stop ends it:
-            # queued behind that M3 either would wait for itself. Neither defers, so
-            # neither needs a turn.
+        if isinstance(command, CycleStart | Abort | ThcHold):
+            # Cycle start answers the M3 that waits for it (G200 S1), a stop ends it, and an
+            # operator's pause must hold now: queued behind that M3 each would wait for it.
+            # None defers, so none needs a turn.
             result = self._apply(command, xy_mm)
             assert result is not None
             return result

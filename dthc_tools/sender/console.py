@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import sys
 import termios
 import tty
@@ -50,8 +51,8 @@ class OperatorConsole:
         self.interactive = interactive
         self.telemetry: dict[str, Any] = {}
         self.messages: list[str] = []
-        self._keys: asyncio.Queue[str] = asyncio.Queue()
-        self._tasks: set[asyncio.Task[None]] = set()
+        self._keys: asyncio.Queue[str] = asyncio.Queue()  # r / q, for the job loop
+        self._pressed: asyncio.Queue[str] = asyncio.Queue()  # from the terminal
         sender.daemon.on_telemetry(self.telemetry.update)
 
     def status_line(self) -> str:
@@ -142,16 +143,28 @@ class OperatorConsole:
         loop = asyncio.get_running_loop()
 
         def readable() -> None:
-            key = sys.stdin.read(1)
-            task = asyncio.ensure_future(self.press(key))
-            self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+            # The descriptor, not sys.stdin: its buffer would swallow the bytes of an arrow
+            # key or of two quick keys, and the descriptor would no longer look readable.
+            data = os.read(fd, 64)
+            if not data:  # end of input: no more keys
+                loop.remove_reader(fd)
+                return
+            for key in data.decode("ascii", "ignore"):
+                self._pressed.put_nowait(key)
+
+        async def one_at_a_time() -> None:
+            # In order, each done before the next: a quick p then c must not resume a hold
+            # that has not completed yet.
+            while True:
+                await self.press(await self._pressed.get())
 
         tty.setcbreak(fd)
         loop.add_reader(fd, readable)
+        keys = asyncio.ensure_future(one_at_a_time())
         try:
             yield
         finally:
+            keys.cancel()
             loop.remove_reader(fd)
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 

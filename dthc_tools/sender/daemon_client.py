@@ -207,6 +207,10 @@ class DaemonClient:
                 elif self._online.is_set():  # online -> offline: its will, or a clean stop
                     self._online.clear()
                     self._background(self._confirm_offline())
+                elif self._waiting:
+                    # Offline found after a reconnect (retained) with requests pending: the
+                    # daemon died while the broker was away; nobody will answer them.
+                    self._background(self._confirm_offline())
                 continue
             if message.topic.matches(f"{self.root}/event"):
                 for handler in self._event_handlers:

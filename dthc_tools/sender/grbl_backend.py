@@ -112,6 +112,8 @@ class GrblBackend:
         self._status_at = time.monotonic()
         self._banners = 0
         self._info_lines: list[str] | None = None  # collecting $I output
+        self._resetting = True  # a banner is expected (connect, clear), else a failure
+        self._since_idle = 0  # lines sent since the last wait_idle
         self._wco: tuple[float, ...] | None = None
         self._meter = SpeedMeter(speed_window_s)
         self._listeners: list[MotionListener] = []
@@ -132,6 +134,7 @@ class GrblBackend:
         await self._until(lambda: self._banners > banners, BANNER_TIMEOUT_S,
                           f"no grbl banner from {self.url} after a soft reset")  # fmt: skip
         await asyncio.sleep(0.05)  # the [MSG:...] lines that follow a banner
+        self._resetting = False
         self._info_lines = []
         await self._command("$I")
         for line in self._info_lines:
@@ -202,6 +205,11 @@ class GrblBackend:
             self._banners += 1
             self._counter.clear()  # a reset empties its receive buffer
             self._sent.clear()
+            if not self._resetting:
+                # A brownout, a DTR or EMI reset: the modal state (G91, units, feed, work
+                # offsets) is gone and the queued motion with it. Never carry on silently.
+                self._fail(BackendError(f"grbl at {self.url} reset unexpectedly ({line}): "
+                                        "the program's modal state is lost"))  # fmt: skip
         elif self._info_lines is not None and line.startswith("["):
             self._info_lines.append(line)
         else:
@@ -250,16 +258,26 @@ class GrblBackend:
         except BackendError as exc:
             log.error("grbl_write_failed", error=str(exc))
 
-    async def _until(self, done: Callable[[], bool], timeout_s: float | None, what: str) -> None:
-        """Wait for ``done()`` (re-checked on every line from grbl); a failure meanwhile
-        raises it; TimeoutError after ``timeout_s`` becomes a BackendError naming ``what``."""
+    async def _until(
+        self,
+        done: Callable[[], bool],
+        timeout_s: float | None,
+        what: str,
+        *,
+        failures: bool = True,
+    ) -> None:
+        """Wait for ``done()`` (re-checked on every line from grbl). A failure raises it, even
+        when ``done()`` holds too (a refused line must never pass for idle), unless
+        ``failures`` is False (hold and clear: they are what follows a failure). A timeout
+        after ``timeout_s`` becomes a BackendError naming ``what``."""
         loop = asyncio.get_running_loop()
         deadline = None if timeout_s is None else loop.time() + timeout_s
         while True:
             self._changed.clear()
+            if failures:
+                self._raise_failure()
             if done():
                 return
-            self._raise_failure()
             remaining = None if deadline is None else deadline - loop.time()
             if remaining is not None and remaining <= 0:
                 raise BackendError(f"grbl at {self.url}: {what}")
@@ -303,6 +321,7 @@ class GrblBackend:
         else:
             await self._until(lambda: self._counter.fits(size), None, "waiting for buffer room")
         self._sent.append(_Sent(text, source_line))
+        self._since_idle += 1
         self._counter.sent(size)
         self._write(text.encode("ascii") + b"\n")
         self.figures.lines_sent += 1
@@ -319,7 +338,13 @@ class GrblBackend:
         return report.state == "Idle" and planner_empty
 
     async def wait_idle(self) -> tuple[float, float]:
+        """Every line done: a ``G4P0`` is answered only once grbl's planner has emptied (a
+        status report alone may come between a line's ok and its cycle start, and stock grbl
+        omits ``Bf:``), then a report of ``Idle``."""
+        if self._since_idle:
+            await self._send("G4P0", None)
         await self._until(self._idle, None, "waiting for idle")
+        self._since_idle = 0
         return self.position
 
     async def hold(self) -> None:
@@ -335,11 +360,8 @@ class GrblBackend:
                 and (report.hold_complete or report.state in ("Idle", "Alarm"))
             )
 
-        try:
-            await self._until(at_rest, ANSWER_TIMEOUT_S, "the feed hold did not complete")
-        except BackendError:
-            if self._failure is None:
-                raise  # a refused line or an alarm is why we hold: it is reported elsewhere
+        await self._until(at_rest, ANSWER_TIMEOUT_S, "the feed hold did not complete",
+                          failures=False)  # fmt: skip
 
     async def resume(self) -> None:
         self._write(CYCLE_START)
@@ -350,18 +372,30 @@ class GrblBackend:
             self._write(JOG_CANCEL)  # a jog is cancelled, not held
             await self._until(lambda: self.status is not None and self.status.state != "Jog",
                               ANSWER_TIMEOUT_S, "the jog did not stop")  # fmt: skip
-        if self.status is not None and self.status.state in MOVING:
-            await self.hold()
+        report = self.status
+        if report is not None and (report.state in MOVING or report.state == "Hold"):
+            await self.hold()  # at rest first (Hold:1 too): a reset in motion loses position
         banners = self._banners
         self._failure = None
+        self._resetting = True
         self._write(SOFT_RESET)
         self.figures.resets += 1
-        await self._until(lambda: self._banners > banners, BANNER_TIMEOUT_S,
-                          "no banner after a soft reset")  # fmt: skip
+        try:
+            await self._until(lambda: self._banners > banners, BANNER_TIMEOUT_S,
+                              "no banner after a soft reset")  # fmt: skip
+            await asyncio.sleep(0.05)  # the [MSG:...] lines that follow a banner
+        finally:
+            self._resetting = False
         self._meter.clear()
+        self._since_idle = 0
         seq = self._status_seq
         await self._until(lambda: self._status_seq > seq, ANSWER_TIMEOUT_S, "no status")
-        self._raise_failure()  # ALARM:3: the reset came in motion
+        if self.status is not None and self.status.state == "Alarm":
+            self._failure = None
+            raise BackendError(
+                "grbl is still in alarm after the reset: check the machine, then home ($H) "
+                "or unlock ($X) it from its console"
+            )
 
     def feed_override(self, step: str) -> None:
         """``reset``, ``+10``, ``-10``, ``+1``, ``-1`` (grbl's real-time override bytes)."""

@@ -14,6 +14,7 @@ re-armed.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -120,6 +121,8 @@ class Sender:
         self.report = SendReport()
         self._pause: asyncio.Event = asyncio.Event()
         self._pause_reason = ""
+        self._go = asyncio.Event()  # cleared while the operator has paused the program
+        self._go.set()
         self.velocity_percent = 100.0  # PlasmaC M67/M68 E3: the machine runs slower
         daemon.on_event(self._on_event)
         daemon.on_offline(self._on_daemon_offline)
@@ -167,15 +170,19 @@ class Sender:
 
     async def cycle_start(self) -> None:
         """After a G200 S1 stop: release the pending M3. After a pause: resume."""
+        if self._pause.is_set() or not self.progress.running:
+            reason = self._pause_reason or "no program runs"
+            raise BackendError(f"nothing to start ({reason}): re-arm and restart instead")
         if self.progress.waiting_cycle_start:
             self.progress.waiting_cycle_start = False
             self.report.cycle_starts.append(self.progress.line)
             log.info("cycle_start", line=self.progress.line)
             await self.daemon.request("cycle_start")
         elif self.progress.operator_paused:
-            await self.daemon.request("thc_hold", on=False)
             await self.backend.resume()
+            await self.daemon.request("thc_hold", on=False)
             self.progress.operator_paused = False
+            self._go.set()
             log.info("resumed_by_operator", line=self.progress.line)
 
     async def pause(self) -> None:
@@ -183,17 +190,15 @@ class Sender:
         if self.progress.operator_paused or not self.progress.running:
             return
         self.progress.operator_paused = True
-        await self.backend.hold()
-        await self.daemon.request("thc_hold", on=True)
+        self._go.clear()
+        await asyncio.gather(self.backend.hold(), self.daemon.request("thc_hold", on=True))
         log.info("paused_by_operator", line=self.progress.line)
 
     async def stop(self) -> None:
         """Torch off and safe height (the daemon's abort: re-arm before the next cut), motion
         held; the program ends."""
         self._pause_reason = "stopped by the operator"
-        self._pause.set()
-        await self._hold()
-        await self.daemon.request("abort")
+        await self._stop_machine()
 
     def feed_override(self, step: str) -> None:
         """``+10``/``-10``/``reset``: the motion controller's feed override, when it has one."""
@@ -235,10 +240,17 @@ class Sender:
         self._pause_reason = ""
         self.velocity_percent = 100.0
         self.progress = Progress(total_lines=len(lines), running=True)
+        self._go.set()
         try:
             return await self._run(lines, start_line, dialect, codes, report)
+        except asyncio.CancelledError:
+            # Ctrl-C, or the caller gave up: nothing may go on without the sender.
+            await asyncio.shield(self._stop_machine())
+            raise
         finally:
             self.progress.running = False
+            self.progress.operator_paused = False
+            self.progress.waiting_cycle_start = False
 
     async def _run(
         self,
@@ -273,7 +285,7 @@ class Sender:
                 continue
             try:
                 for line in restart.lines():  # once: back to where the skipped lines end
-                    await self.backend.queue(line, source_line=number)
+                    await self._unless_paused(self.backend.queue(line, source_line=number))
                 await self._step(step, plan, report)
             except BackendError as exc:
                 report.error, report.error_line = str(exc), exc.line_number or number
@@ -283,7 +295,7 @@ class Sender:
                 report.error, report.error_line = f"paused: {self._pause_reason}", number
             if report.error:
                 report.paused.append(self._pause_reason or report.error)
-                await self._hold()
+                await self._stop_machine()
                 log.warning("program_stopped", line=number, error=report.error)
                 report.warnings = plan.warnings
                 return report
@@ -291,11 +303,40 @@ class Sender:
             await self._wait_motion()
         except BackendError as exc:  # a line refused late (streamed ahead), an alarm
             report.error, report.error_line = str(exc), exc.line_number or number
-            await self._hold()
+            await self._stop_machine()
         if self._pause.is_set() and not report.error:
             report.error, report.error_line = f"paused: {self._pause_reason}", number
         report.warnings = plan.warnings
         return report
+
+    async def _stop_machine(self) -> None:
+        """The program stops: motion held and, at the same time, the daemon told to end a
+        cut that may be running (a refused line, a lost grbl, Ctrl-C mid-cut must never
+        leave the torch burning at a standstill). Harmless when no cut runs."""
+        self._pause.set()
+        await asyncio.gather(self._hold(), self._abort_quietly())
+
+    async def _abort_quietly(self) -> None:
+        try:
+            await self.daemon.request("abort")
+        except DaemonError as exc:  # gone: its board's lease has turned the torch off
+            log.error("abort_failed", error=str(exc))
+
+    async def _unless_paused(self, work: Coroutine[Any, Any, object]) -> None:
+        """``work`` (a queue waiting for room in the controller's buffer), given up when the
+        program pauses meanwhile."""
+        task = asyncio.ensure_future(work)
+        paused = asyncio.ensure_future(self._pause.wait())
+        try:
+            await asyncio.wait({task, paused}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            paused.cancel()
+        if not task.done():
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+            return
+        task.result()
 
     async def _hold(self) -> None:
         try:
@@ -311,7 +352,9 @@ class Sender:
         number = step.source_line
         if isinstance(step, MotionStep):
             words = tokenize(step.line).words  # the plan has checked every number
-            await self.backend.queue(self._reduced(step.line, words), source_line=number)
+            await self._unless_paused(
+                self.backend.queue(self._reduced(step.line, words), source_line=number)
+            )
             report.lines_sent += 1
             return
         if isinstance(step, DwellStep):
@@ -334,8 +377,11 @@ class Sender:
     async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
         xy = await self._wait_motion()
+        await self._unless_paused(self._go.wait())  # an operator pause: not during it
         if self._pause.is_set():
             return
+        if any(starts_cut(command) for command in parsed.commands):
+            report.cut_lines.append(step.source_line)  # where a restart re-cuts from
         data = await self.daemon.gcode(
             step.line, line_number=step.source_line, xy=xy, dialect=str(plan.dialect)
         )
@@ -349,7 +395,6 @@ class Sender:
                 self.velocity_percent = command.percent if command.percent > 0 else 100.0
             if starts_cut(command):
                 report.cuts_started += 1
-                report.cut_lines.append(step.source_line)
                 self.progress.cut += 1
 
     def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
@@ -380,54 +425,83 @@ class Sender:
 
 
 class RestartPosition:
-    """The motion state the skipped lines of a restart leave: units, distance mode, feed and
-    the XY they end at, so the restart goes there first (``G0``) and carries on modally."""
+    """The motion state the skipped lines of a restart leave, so the restart first goes
+    where they end (``G0``) and then carries on modally: units, work offset (G54-G59),
+    distance mode, motion mode and feed. Positions are kept in millimetres and written in
+    the units in force. X and Y of G10, G28, G30, G53 and G92 lines are not targets (and
+    those lines are not replayed: an origin set again here would be set at the wrong
+    place); an incremental program whose start is unknown cannot be restarted."""
+
+    _NOT_TARGETS = frozenset({10.0, 28.0, 28.1, 30.0, 30.1, 53.0, 92.0, 92.1})
 
     def __init__(self) -> None:
         self.units = 21.0  # G21 mm / G20 inch
         self.absolute = True
-        self.feed: float | None = None
-        self.x: float | None = None
-        self.y: float | None = None
+        self.motion: float | None = None  # G0-G3
+        self.offset: float | None = None  # G54-G59
+        self.feed: float | None = None  # in the units in force when it was set
+        self.x_mm: float | None = None
+        self.y_mm: float | None = None
+        self.unknown = ""  # why the position is unknown, if it is
         self.pending = False
 
     def skip(self, step: Step) -> None:
         if not isinstance(step, MotionStep):
             return
         self.pending = True
-        relative_x = relative_y = 0.0
-        for word in tokenize(step.line).words:
-            value = word.value
-            if word.letter == "G" and value in (20.0, 21.0):
-                self.units = value
-            elif word.letter == "G" and value in (90.0, 91.0):
-                self.absolute = value == 90.0
-            elif word.letter == "F":
-                self.feed = value
-            elif word.letter == "X":
-                relative_x = value
-            elif word.letter == "Y":
-                relative_y = value
-        has = {w.letter for w in tokenize(step.line).words}
-        if self.absolute:
-            self.x = relative_x if "X" in has else self.x
-            self.y = relative_y if "Y" in has else self.y
-        else:
-            self.x = (self.x or 0.0) + relative_x
-            self.y = (self.y or 0.0) + relative_y
+        words = tokenize(step.line).words
+        codes = {w.value for w in words if w.letter == "G"}
+        for code in codes:
+            if code in (20.0, 21.0):
+                self.units = code
+            elif code in (90.0, 91.0):
+                self.absolute = code == 90.0
+            elif code in (0.0, 1.0, 2.0, 3.0):
+                self.motion = code
+            elif 54.0 <= code <= 59.0:
+                self.offset = code
+        scale = 25.4 if self.units == 20.0 else 1.0
+        for word in words:
+            if word.letter == "F":
+                self.feed = word.value
+        if codes & self._NOT_TARGETS:
+            return
+        for word in words:
+            if word.letter not in "XY":
+                continue
+            value = word.value * scale
+            now = self.x_mm if word.letter == "X" else self.y_mm
+            if not self.absolute:
+                if now is None:
+                    self.unknown = (
+                        f"line {step.source_line} moves incrementally from an unknown start"
+                    )
+                    continue
+                value += now
+            if word.letter == "X":
+                self.x_mm = value
+            else:
+                self.y_mm = value
 
     def lines(self) -> list[str]:
-        """The lines that restore the state (once; then nothing)."""
+        """The lines that restore the state (once; then nothing). BackendError when the
+        position the restart must go to is unknown."""
         if not self.pending:
             return []
         self.pending = False
-        out = [f"G{self.units:g} G90"]
-        target = "".join(f" {axis}{v:.4f}" for axis, v in (("X", self.x), ("Y", self.y))
-                         if v is not None)  # fmt: skip
+        if self.unknown:
+            raise BackendError(f"cannot restart here: {self.unknown}")
+        scale = 25.4 if self.units == 20.0 else 1.0
+        offset = f" G{self.offset:g}" if self.offset is not None else ""
+        out = [f"G{self.units:g} G90{offset}"]
+        target = "".join(f" {axis}{v / scale:.4f}" for axis, v in (("X", self.x_mm),
+                         ("Y", self.y_mm)) if v is not None)  # fmt: skip
         if target:
             out.append(f"G0{target}")
-        if self.feed is not None:
-            out.append(f"F{self.feed:g}")
+        modal = [f"G{self.motion:g}" if self.motion not in (None, 0.0) else "",
+                 f"F{self.feed:g}" if self.feed is not None else ""]  # fmt: skip
+        if any(modal):
+            out.append("".join(modal))
         if not self.absolute:
             out.append("G91")
         return out

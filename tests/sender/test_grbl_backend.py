@@ -90,7 +90,8 @@ async def test_classic_grbl_is_identified_and_streamed_by_counting(grbl: Any) ->
     figures = backend.figures
     stats = await emulator.stats()
     assert stats["rx_overflow"] == 0
-    assert stats["ok"] == stats["lines"] == 2 + len(SQUARES)  # $I and the program
+    # $I, the program, and wait_idle's G4P0 (its ok: the planner has emptied)
+    assert stats["ok"] == stats["lines"] == 3 + len(SQUARES)
     assert stats["z_words_received"] == stats["spindle_words_received"] == 0
     assert 80 < figures.max_in_flight_bytes < 128  # lines really were streamed ahead
     assert any(state == "Run" and speed > 50.0 for speed, state in speeds)
@@ -180,6 +181,24 @@ async def test_a_soft_limit_alarm_stops_the_program_and_a_clear_reports_it(grbl:
         await backend.wait_idle()
     with pytest.raises(BackendError, match=r"ALARM:2|alarm"):
         await backend.queue("G0 X1")
+    with pytest.raises(BackendError, match=r"still in alarm.*\$X"):
+        await backend.clear()  # a restart must not begin on a locked machine
+    await backend.close()
+
+
+async def test_an_unexpected_reset_stops_the_program(grbl: Any) -> None:
+    """A brownout or DTR reset loses G91, the feed and the queued motion: never carry on."""
+    emulator = grbl()
+    backend = await connected(emulator)
+    await backend.queue("G21 G91 G1 X10 Y10 F3000")
+    await backend.wait_idle()
+    backend._write(b"\x18")  # as if the controller had rebooted by itself
+    await asyncio.sleep(0.3)
+    with pytest.raises(BackendError, match="reset unexpectedly"):
+        await backend.queue("G1 X10 Y10")
+    await backend.clear()  # the operator's re-arm: a reset we asked for is fine
+    await backend.queue("G90 G0 X0 Y0")
+    assert await backend.wait_idle() == pytest.approx((0.0, 0.0))
     await backend.close()
 
 

@@ -13,6 +13,7 @@ import pytest
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.program.plan import MotionStep
 from dthc_tools.sender import DaemonClient, Sender
+from dthc_tools.sender.backend import BackendError
 from dthc_tools.sender.console import OperatorConsole
 from dthc_tools.sender.daemon_client import DaemonError
 from dthc_tools.sender.sender import RestartPosition, SendReport
@@ -138,7 +139,7 @@ def test_a_restart_goes_to_where_the_skipped_lines_end_in_their_units_and_mode()
     position = RestartPosition()
     for line in ["G20 G90", "G0 X1 Y2", "G1 X3 F60", "G91", "G1 Y0.5"]:
         position.skip(MotionStep(line, 1, line))
-    assert position.lines() == ["G20 G90", "G0 X3.0000 Y2.5000", "F60", "G91"]
+    assert position.lines() == ["G20 G90", "G0 X3.0000 Y2.5000", "G1F60", "G91"]
     assert position.lines() == []  # once
 
 
@@ -150,7 +151,7 @@ async def test_a_restart_from_a_line_positions_xy_first() -> None:
         program, start_line=7, dialect=Dialect.MASSO
     )
     assert report.ok, report.error
-    assert backend.queued[:3] == ["G21 G90", "G0 X70.0000 Y80.0000", "F3000"]
+    assert backend.queued[:3] == ["G21 G90", "G0 X70.0000 Y80.0000", "F3000"]  # G0 in force
     assert daemon.lines[0] == "M3"
 
 
@@ -160,7 +161,7 @@ async def test_a_failing_key_is_shown_not_raised() -> None:
             raise DaemonError(f"{name}: nothing waits for cycle start (idle)")
 
     sender = Sender(cast(DaemonClient, Refusing()), FakeBackend())
-    sender.progress.waiting_cycle_start = True
+    sender.progress.waiting_cycle_start = sender.progress.running = True
     console = OperatorConsole(sender, out=io.StringIO(), interactive=False)
     await console.press("c")
     assert console.messages == ["c: cycle_start: nothing waits for cycle start (idle)"]
@@ -200,3 +201,63 @@ async def test_a_daemon_pause_holds_the_motion_at_once_not_when_the_loop_looks()
     for handler in daemon.handlers:
         handler({"type": "arc_lost", "reason": "arc lost"})
     await asyncio.wait_for(held.wait(), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("skipped", "restart"),
+    [
+        # The work offset and the motion mode come back (a modal X60 after it is a cut).
+        (["G55 G90 G1 X10 Y10 F2000", "X50"], ["G21 G90 G55", "G0 X50.0000 Y10.0000", "G1F2000"]),
+        # Millimetres kept when the program changes units.
+        (["G20 G90 G0 X1", "G21 G0 Y10"], ["G21 G90", "G0 X25.4000 Y10.0000"]),
+        # An origin line's X and Y are no target.
+        (["G90 G0 X5 Y5", "G10 L20 P1 X0 Y0", "G92 X1 Y1"], ["G21 G90", "G0 X5.0000 Y5.0000"]),
+    ],
+)
+def test_a_restart_keeps_what_the_skipped_lines_set(skipped: list[str], restart: list[str]) -> None:
+    position = RestartPosition()
+    for n, line in enumerate(skipped, start=1):
+        position.skip(MotionStep(line, n, line))
+    assert position.lines() == restart
+
+
+def test_an_incremental_program_from_an_unknown_start_cannot_be_restarted() -> None:
+    position = RestartPosition()
+    position.skip(MotionStep("G91 G1 X10 F100", 3, "G91 G1 X10 F100"))
+    with pytest.raises(BackendError, match="line 3 moves incrementally from an unknown start"):
+        position.lines()
+
+
+async def test_a_sender_stopping_on_its_own_ends_the_cut_too() -> None:
+    """A line grbl refuses mid-cut: the motion is held and the daemon told to abort at once,
+    so the torch does not burn at a standstill while the operator reads the error."""
+
+    class Refusing(FakeBackend):
+        async def queue(self, line: str, *, source_line: int | None = None) -> None:
+            if "X50" in line:
+                raise BackendError("grbl refused line 6: error:20", line_number=source_line)
+            await super().queue(line, source_line=source_line)
+
+    daemon = S1Daemon()
+    sender = Sender(cast(DaemonClient, daemon), Refusing(), auto_cycle_start=True)
+    report = await sender.run(S1_PROGRAM, dialect=Dialect.MASSO)
+    assert report.error_line == 6
+    assert ("abort", {}) in daemon.args
+    assert report.restart_line == 5  # the start of the cut it happened in
+
+
+async def test_a_failed_m3_restarts_from_itself_not_the_cut_before() -> None:
+    class FailingSecondM3(S1Daemon):
+        m3 = 0
+
+        async def gcode(self, line: str, **kwargs: Any) -> dict[str, Any]:
+            if line == "M3":
+                self.m3 += 1
+                if self.m3 == 2:
+                    raise DaemonError("M3: arc not established")
+            return await super().gcode(line, **kwargs)
+
+    sender = Sender(cast(DaemonClient, FailingSecondM3()), FakeBackend(), auto_cycle_start=True)
+    report = await sender.run(S1_PROGRAM, dialect=Dialect.MASSO)
+    assert report.error_line == 9
+    assert report.restart_line == 9
