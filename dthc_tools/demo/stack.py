@@ -312,8 +312,11 @@ class Stack:
         daemon: DaemonClient | None = None,
         dialect: Dialect | None = None,
         codes: Mapping[str, str] | None = None,
+        auto_cycle_start: bool = True,
     ) -> SendReport:
-        """Run the sender over ``lines``; ``daemon`` must not be connected yet."""
+        """Run the sender over ``lines``; ``daemon`` must not be connected yet. No operator
+        at a demo: cycle start is pressed at each G200 S1 stop unless ``auto_cycle_start``
+        is False (a test presses it itself)."""
         daemon = daemon or self.daemon_client()
         backend = self.motion_backend()
         if isinstance(backend, GrblBackend):
@@ -321,8 +324,7 @@ class Stack:
         self.last_backend = backend
         async with daemon.connected():
             try:
-                # No operator at a demo: cycle start is pressed at each G200 S1 stop.
-                return await Sender(daemon, backend, auto_cycle_start=True).run(
+                return await Sender(daemon, backend, auto_cycle_start=auto_cycle_start).run(
                     lines, start_line=start_line, dialect=dialect, codes=codes
                 )
             finally:

@@ -30,19 +30,19 @@ PROGRAM = [
     "G0 X20 Y20",
     "M3 $0 S1",
     "M65 P2",  # THC on
-    f"G1 X120 Y20 F{FEED:g}",  # a corner at 120,20
-    "G1 X120 Y60",
-    "G1 X20 Y60",  # and at 120,60
+    f"G1 X70 Y20 F{FEED:g}",  # a corner at 70,20
+    "G1 X70 Y50",
+    "G1 X20 Y50",  # and at 70,50
     "M67 E3 Q40",  # the slow-down: the machine runs at 40 % of the programmed feed
-    f"G1 X20 Y100 F{FEED:g}",
+    f"G1 X20 Y70 F{FEED:g}",
     "M67 E3 Q0",
-    f"G1 X120 Y100 F{FEED:g}",
+    f"G1 X70 Y70 F{FEED:g}",
     "M5 $0",
-    "G0 X200 Y20",
+    "G0 X100 Y20",
     "M3 $0 S1",
     "M65 P2",
-    f"G1 X300 Y20 F{FEED:g}",
-    "G1 X300 Y80",
+    f"G1 X150 Y20 F{FEED:g}",
+    "G1 X150 Y50",
     "M5 $0",
     "G0 X0 Y0",
     "M30",

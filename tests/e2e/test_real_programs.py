@@ -95,7 +95,9 @@ async def test_masso_program_stops_after_pierce_midway_and_goes_on_at_cycle_star
     options = StackOptions(tmp_path, scenario="flat_clean", broker="mosquitto")
     async with Stack(options) as stack:
         lines = program_lines(str(PROGRAMS / "masso_s1_midway.nc"))
-        sending = asyncio.create_task(stack.send(lines, dialect=Dialect.MASSO))
+        sending = asyncio.create_task(
+            stack.send(lines, dialect=Dialect.MASSO, auto_cycle_start=False)
+        )
         async with asyncio.timeout(60):
             while not any(e.get("cause") == "stop_after_pierce" for e in stack.events):
                 assert not sending.done(), sending.result()
