@@ -172,5 +172,12 @@ async def running_gateway(
         yield gateway, controller
     finally:
         task.cancel()
+        # Python 3.11's wait_for (inside aiomqtt's connect) can lose a cancel that races a
+        # refused CONNACK (CPython gh-86296): the gateway then retries on. Ask again.
+        for _ in range(50):
+            done, _ = await asyncio.wait({task}, timeout=0.2)
+            if done:
+                break
+            task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
