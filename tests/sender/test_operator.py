@@ -261,3 +261,39 @@ async def test_a_failed_m3_restarts_from_itself_not_the_cut_before() -> None:
     report = await sender.run(S1_PROGRAM, dialect=Dialect.MASSO)
     assert report.error_line == 9
     assert report.restart_line == 9
+
+
+async def test_keys_from_a_terminal_reach_the_sender_in_order_and_the_terminal_is_restored(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The console on a real terminal (a pty): cbreak mode, each key handled in order (an
+    arrow key's escape bytes do not swallow the next key), the modes restored after."""
+    import os
+    import pty
+    import termios
+
+    master, slave = pty.openpty()
+    terminal = os.fdopen(slave, "r")
+    monkeypatch.setattr("sys.stdin", terminal)
+    before = termios.tcgetattr(slave)
+    daemon = S1Daemon()
+    sender = Sender(cast(DaemonClient, daemon), FakeBackend())
+    console = OperatorConsole(sender, out=io.StringIO(), interactive=True)
+    job = asyncio.ensure_future(console.run_job(S1_PROGRAM, dialect=Dialect.MASSO))
+    try:
+        for _ in range(2):
+            await waiting(sender)
+            os.write(master, b"\x1b[A+c")  # an arrow key, torch up, cycle start
+            for _ in range(100):
+                if not sender.progress.waiting_cycle_start:
+                    break
+                await asyncio.sleep(0.01)
+        report = await asyncio.wait_for(job, 5)
+        assert report.ok, report.error
+        assert report.cycle_starts == [5, 9]
+        assert [name for name, _ in daemon.args].count("torch_up") == 2
+        assert termios.tcgetattr(slave) == before
+    finally:
+        job.cancel()
+        terminal.close()
+        os.close(master)
