@@ -17,6 +17,7 @@ __all__ = [
     "CutParams",
     "CycleStart",
     "DefineMaterial",
+    "HeightOverride",
     "LegacyMode",
     "OhmicTest",
     "OperatingMode",
@@ -261,6 +262,15 @@ class Rearm:
 
 
 @dataclass(frozen=True, slots=True)
+class HeightOverride:
+    """``height_override`` {mm} (a step, 0.1 mm units) or {reset: true}: the cut height
+    raised or lowered on the fly, within half the cut height either way."""
+
+    step_mm: float
+    reset: bool = False
+
+
+@dataclass(frozen=True, slots=True)
 class Abort:
     """The operator's stop (``abort`` request): a running cut ends through the fault path
     (torch off, safe height, re-arm before the next cut); the command waiting on it, an M3
@@ -297,6 +307,7 @@ Command = (
     | CycleStart
     | Rearm
     | Abort
+    | HeightOverride
     | ThcHold
     | OhmicTest
     | TorchEnable

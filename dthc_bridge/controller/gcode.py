@@ -76,6 +76,7 @@ from .commands import (
     CutParams,
     CycleStart,
     DefineMaterial,
+    HeightOverride,
     LegacyMode,
     OhmicTest,
     OperatingMode,
@@ -652,6 +653,27 @@ def _rearm(_name: str, _args: Mapping[str, object]) -> Command:
     return Rearm()
 
 
+MAX_HEIGHT_STEP_MM = 1.0
+
+
+def _height_override(name: str, args: Mapping[str, object]) -> Command:
+    if args.get("reset") is True:
+        if "mm" in args:
+            raise CommandError(f"{name} mm", "give a step or reset, not both")
+        return HeightOverride(0.0, reset=True)
+    if "reset" in args:
+        raise CommandError(f"{name} reset", f"{args['reset']!r} is not true")
+    if "mm" not in args:
+        raise CommandError(f"{name} mm", "required argument is missing (or reset: true)")
+    step = _arg_number(f"{name} mm", args["mm"])
+    tenths = round(step * 10.0)
+    if abs(step * 10.0 - tenths) > 1e-6 or tenths == 0:
+        raise CommandError(f"{name} mm", f"{step:g} is not a step of 0.1 mm")
+    if abs(step) > MAX_HEIGHT_STEP_MM:
+        raise CommandError(f"{name} mm", f"{step:g} is more than {MAX_HEIGHT_STEP_MM:g} mm")
+    return HeightOverride(tenths / 10.0)
+
+
 def _abort(_name: str, _args: Mapping[str, object]) -> Command:
     return Abort()
 
@@ -692,6 +714,7 @@ _REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]],
     "rearm": (frozenset(), _rearm),
     "thc_hold": (frozenset({"on"}), _thc_hold),
     "abort": (frozenset(), _abort),
+    "height_override": (frozenset({"mm", "reset"}), _height_override),
     "ohmic_test": (frozenset(), _ohmic_test),
     "operating_mode": (frozenset({"mode"}), _operating_mode),
     "velocity_reduction": (frozenset({"percent"}), _request_velocity_reduction),

@@ -21,6 +21,7 @@ from .commands import (
     CutParams,
     CycleStart,
     DefineMaterial,
+    HeightOverride,
     LegacyMode,
     OhmicTest,
     OperatingMode,
@@ -116,11 +117,24 @@ class PlasmaController:
         self.materials = MaterialTable(library, self.default_material, initial=selected)
         self.sequence.torch_enabled = True
         self.sequence.work_origin_mm = None
+        self.sequence.override_height(0.0)  # the last program's override ends with it
         material = self.materials.selected
         return {
             "material": selected,
             "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
         }
+
+    def _override_height(self, command: HeightOverride) -> dict[str, Any]:
+        sequence = self.sequence
+        height = 0.0 if command.reset else round(sequence.height_override_mm + command.step_mm, 1)
+        bound = sequence.params.cut_height_mm / 2.0
+        if abs(height) > bound + 1e-9:
+            raise CommandError(
+                "height_override mm",
+                f"{height:+.1f} mm is beyond half the cut height (±{bound:.2f} mm)",
+            )
+        sequence.override_height(height)
+        return {"height_override_mm": height, "target_v": sequence.thc.target_v}
 
     def _in_inches(self, material: Material) -> bool:
         """Library and program materials are in the machine's units; material 0 is the
@@ -246,6 +260,8 @@ class PlasmaController:
             if sequence.state is not State.FAULTED:
                 raise CommandError("rearm", f"nothing to re-arm ({sequence.state})")
             sequence.rearm(now)
+        elif isinstance(command, HeightOverride):
+            return Outcome(data=self._override_height(command))
         elif isinstance(command, Abort):
             busy = sequence.busy
             sequence.abort("stopped by the operator")

@@ -124,6 +124,9 @@ class CutSequence:
         self.thc_z_feed_mm_min: float | None = None
         self.velocity_percent = 100.0
         self.voltage_offset_v = 0.0  # torch up / torch down
+        # PlasmaC's height override: the cut height raised (+) or lowered, as a change of the
+        # target voltage through the THC slope; kept from cut to cut until the program ends.
+        self.height_override_mm = 0.0
         self.state = State.IDLE
         self.cut: _Cut | None = None
         self.last_zero_mm: float | None = None
@@ -188,6 +191,7 @@ class CutSequence:
             "g200_active": self.g200_active,
             "thc_enabled": self.thc_enabled,
             "target_v": self.thc.target_v,
+            "height_override_mm": self.height_override_mm,
             "slow_target_v": self.thc.slow_target_v,
             "voltage_v": self.thc.filtered_v,
             "z_mm": None if math.isnan(self._z_mm) else round(self._z_mm, 3),
@@ -235,6 +239,17 @@ class CutSequence:
     def request_current(self, current_a: float) -> None:
         """Plasma current set point (analog output): passed to the board as it comes."""
         self._emit(act.ApplyCurrent(current_a))
+
+    def override_height(self, height_mm: float) -> None:
+        """Set the height override (the caller checks its bounds); a cut at height now follows
+        the new target at once."""
+        delta_v = (height_mm - self.height_override_mm) * self.thc.config.slope_v_per_mm
+        self.height_override_mm = height_mm
+        if self.thc.target_v is not None:
+            self.thc.target_v += delta_v
+
+    def _override_v(self) -> float:
+        return self.voltage_offset_v + self.height_override_mm * self.thc.config.slope_v_per_mm
 
     def adjust_voltage(self, delta_v: float) -> None:
         self.voltage_offset_v += delta_v
@@ -696,7 +711,7 @@ class CutSequence:
         assert cut is not None
         fixed = self.params.cut_voltage_v
         if fixed is not None:
-            self.thc.target_v = fixed + self.voltage_offset_v
+            self.thc.target_v = fixed + self._override_v()
             return
         # Auto voltage (G200 V0, G100 P5 A1): the mean of the filtered voltage over a short
         # window at speed; short, because the plate drifts under a torch that holds still.
@@ -707,7 +722,7 @@ class CutSequence:
         if filtered is not None:
             cut.auto_v.append(filtered)
         if now - cut.auto_v_since >= cfg.auto_voltage_window_s and cut.auto_v:
-            self.thc.target_v = sum(cut.auto_v) / len(cut.auto_v) + self.voltage_offset_v
+            self.thc.target_v = sum(cut.auto_v) / len(cut.auto_v) + self._override_v()
 
     def tick(self, now: float) -> None:
         self.now = now

@@ -7,6 +7,7 @@ Keys (single keys, no Enter, when the terminal is interactive):
     s  stop: torch off, safe height, motion held; the program ends
     +  torch up 1 V       -  torch down 1 V
     >  feed +10 %         <  feed -10 %         =  feed 100 %   (grbl's feed override)
+    u  cut height +0.1 mm d  cut height -0.1 mm (PlasmaC's height override)
     r  after an error: re-arm, then restart from the last resume point (G100 P0) or the
        start of the cut the error happened in
     q  after an error: quit
@@ -38,10 +39,14 @@ __all__ = ["KEYS", "OperatorConsole"]
 
 log = structlog.get_logger("dthc_tools.sender.console")
 
-KEYS = "c cycle start · p pause · s stop · +/- torch 1 V · >/</= feed · r re-arm+restart · q quit"
+KEYS = (
+    "c cycle start · p pause · s stop · +/- torch 1 V · u/d height 0.1 mm · >/</= feed · "
+    "r re-arm+restart · q quit"
+)
 FEED_KEYS = {">": "+10", "<": "-10", "=": "reset"}
 BAR = 20
 TORCH_STEP_V = 1.0
+HEIGHT_STEP_MM = 0.1
 
 
 class OperatorConsole:
@@ -84,6 +89,8 @@ class OperatorConsole:
                 await sender.stop()
             elif key in "+-" and key:
                 await sender.torch(TORCH_STEP_V if key == "+" else -TORCH_STEP_V)
+            elif key in ("u", "d"):
+                await sender.height(HEIGHT_STEP_MM if key == "u" else -HEIGHT_STEP_MM)
             elif key in FEED_KEYS:
                 sender.feed_override(FEED_KEYS[key])
             else:

@@ -207,6 +207,10 @@ class Sender:
             raise BackendError("this motion backend has no feed override")
         override(step)
 
+    async def height(self, step_mm: float) -> None:
+        """Height override: the cut height up (+) or down (-) by ``step_mm`` (0.1 mm steps)."""
+        await self.daemon.request("height_override", mm=step_mm)
+
     async def torch(self, volts: float) -> None:
         """Torch up (+) or down (-): the THC target moves by ``volts``."""
         await self.daemon.request("torch_up" if volts > 0 else "torch_down", volts=abs(volts))

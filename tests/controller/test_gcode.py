@@ -713,4 +713,5 @@ def test_request_names_are_published() -> None:
         "ohmic_test",
         "thc_hold",
         "abort",
+        "height_override",
     } == REQUEST_NAMES

@@ -297,3 +297,15 @@ async def test_keys_from_a_terminal_reach_the_sender_in_order_and_the_terminal_i
         job.cancel()
         terminal.close()
         os.close(master)
+
+
+async def test_the_height_keys_step_the_cut_height_by_a_tenth() -> None:
+    daemon = S1Daemon()
+    console = OperatorConsole(
+        Sender(cast(DaemonClient, daemon), FakeBackend()), out=io.StringIO(), interactive=False
+    )
+    await console.press("u")
+    await console.press("d")
+    assert [a for a in daemon.args if a[0] == "height_override"] == [
+        ("height_override", {"mm": 0.1}), ("height_override", {"mm": -0.1}),
+    ]  # fmt: skip
