@@ -1,14 +1,17 @@
 """grbl 1.1's numbered answers: ``error:N`` status codes and ``ALARM:N`` alarm codes.
 
 The numbers are the published ones (grbl v1.1 interface documentation, error and alarm code
-tables), so a sender's decoding can be tested against them; the short texts are ours.
+tables), so a sender's decoding can be tested against them; their texts are the sender's
+(:mod:`dthc_tools.sender.grbl_protocol`), one table for both.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
 
-__all__ = ["ALARM_TEXT", "STATUS_TEXT", "Alarm", "EmulatorError", "GcodeRefused", "Status"]
+from dthc_tools.sender.grbl_protocol import error_text
+
+__all__ = ["Alarm", "EmulatorError", "GcodeRefused", "Status"]
 
 
 class Status(IntEnum):
@@ -66,58 +69,6 @@ class Alarm(IntEnum):
     HOMING_FAIL_APPROACH = 9
 
 
-STATUS_TEXT: dict[Status, str] = {
-    Status.EXPECTED_COMMAND_LETTER: "a word does not start with a letter",
-    Status.BAD_NUMBER_FORMAT: "a number is missing or malformed",
-    Status.INVALID_STATEMENT: "the $ command is not recognised",
-    Status.NEGATIVE_VALUE: "a value that must be positive is negative",
-    Status.SETTING_DISABLED: "homing is not enabled ($22)",
-    Status.SETTING_STEP_PULSE_MIN: "step pulse shorter than 3 microseconds",
-    Status.SETTING_READ_FAIL: "settings storage read failed, defaults restored",
-    Status.IDLE_ERROR: "this $ command needs the machine idle",
-    Status.SYSTEM_GC_LOCK: "G-code is locked out in alarm or jog state",
-    Status.SOFT_LIMIT_ERROR: "soft limits need homing enabled",
-    Status.OVERFLOW: "the line is longer than the line buffer",
-    Status.MAX_STEP_RATE_EXCEEDED: "the setting exceeds the maximum step rate",
-    Status.CHECK_DOOR: "the safety door is open",
-    Status.LINE_LENGTH_EXCEEDED: "build info or startup line too long for storage",
-    Status.TRAVEL_EXCEEDED: "the jog target is beyond the machine's travel",
-    Status.INVALID_JOG_COMMAND: "the jog command has no '=' or a forbidden word",
-    Status.SETTING_DISABLED_LASER: "laser mode needs a PWM output",
-    Status.UNSUPPORTED_COMMAND: "an unsupported or invalid G-code command",
-    Status.MODAL_GROUP_VIOLATION: "two commands of one modal group on the line",
-    Status.UNDEFINED_FEED_RATE: "no feed rate set",
-    Status.COMMAND_VALUE_NOT_INTEGER: "the command needs an integer number",
-    Status.AXIS_COMMAND_CONFLICT: "two commands on the line use the axis words",
-    Status.WORD_REPEATED: "a word is repeated on the line",
-    Status.NO_AXIS_WORDS: "the command needs axis words",
-    Status.INVALID_LINE_NUMBER: "the N line number is out of range",
-    Status.VALUE_WORD_MISSING: "a required P or L word is missing",
-    Status.UNSUPPORTED_COORD_SYS: "that work coordinate system is not supported",
-    Status.G53_INVALID_MOTION_MODE: "G53 needs G0 or G1 active",
-    Status.AXIS_WORDS_EXIST: "axis words while G80 is active",
-    Status.NO_AXIS_WORDS_IN_PLANE: "the arc has no axis word in its plane",
-    Status.INVALID_TARGET: "the motion target is invalid",
-    Status.ARC_RADIUS_ERROR: "the arc radius cannot reach the target",
-    Status.NO_OFFSETS_IN_PLANE: "the arc has no centre offset in its plane",
-    Status.UNUSED_WORDS: "words on the line no command uses",
-    Status.G43_DYNAMIC_AXIS_ERROR: "G43.1 applies to the Z axis only",
-    Status.MAX_VALUE_EXCEEDED: "the tool number is too large",
-}
-
-ALARM_TEXT: dict[Alarm, str] = {
-    Alarm.HARD_LIMIT: "hard limit switch hit: position lost",
-    Alarm.SOFT_LIMIT: "soft limit: a target beyond the machine's travel",
-    Alarm.ABORT_CYCLE: "reset while moving: position may be lost",
-    Alarm.PROBE_FAIL_INITIAL: "probe not in its expected state before probing",
-    Alarm.PROBE_FAIL_CONTACT: "probe made no contact",
-    Alarm.HOMING_FAIL_RESET: "reset during homing",
-    Alarm.HOMING_FAIL_DOOR: "safety door opened during homing",
-    Alarm.HOMING_FAIL_PULLOFF: "homing pull-off did not clear the switch",
-    Alarm.HOMING_FAIL_APPROACH: "homing switch not found",
-}
-
-
 class EmulatorError(Exception):
     """Root of the emulator's exceptions."""
 
@@ -129,4 +80,4 @@ class GcodeRefused(EmulatorError):
         self.status = status
         self.detail = detail
         suffix = f": {detail}" if detail else ""
-        super().__init__(f"error:{int(status)} ({STATUS_TEXT[status]}){suffix}")
+        super().__init__(f"error:{int(status)} ({error_text(int(status))}){suffix}")

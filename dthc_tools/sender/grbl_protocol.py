@@ -34,6 +34,7 @@ __all__ = [
     "alarm_text",
     "error_text",
     "for_grbl",
+    "is_banner",
     "parse_status",
 ]
 
@@ -46,7 +47,6 @@ JOG_CANCEL = b"\x85"
 FEED_OVERRIDE = {
     "reset": b"\x90", "+10": b"\x91", "-10": b"\x92", "+1": b"\x93", "-1": b"\x94",
 }  # fmt: skip
-RAPID_OVERRIDE = {"100": b"\x95", "50": b"\x96", "25": b"\x97"}
 
 # grbl 1.1's documented codes, in our words.
 ERRORS = {
@@ -143,14 +143,6 @@ class StatusReport:
         if offset is None:
             return self.mpos
         return tuple(m - o for m, o in zip(self.mpos, offset, strict=False))
-
-    def machine_position(self, wco: tuple[float, ...] | None) -> tuple[float, ...] | None:
-        if self.mpos is not None:
-            return self.mpos
-        offset = self.wco or wco
-        if self.wpos is None or offset is None:
-            return self.wpos
-        return tuple(w + o for w, o in zip(self.wpos, offset, strict=False))
 
 
 def _numbers(text: str, what: str) -> tuple[float, ...]:
