@@ -17,7 +17,7 @@ import asyncio
 import contextlib
 from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import structlog
 
@@ -48,6 +48,7 @@ from .daemon_client import DaemonClient, DaemonError
 __all__ = ["SendReport", "Sender"]
 
 log = structlog.get_logger("dthc_tools.sender")
+_T = TypeVar("_T")
 
 
 @dataclass
@@ -134,11 +135,9 @@ class Sender:
         """The motion controller's measured XY speed, to the daemon's anti-dive (boards
         without an XY speed input). Fire and forget: the next report is 100 ms away."""
         self.motion_reports += 1
-        task = asyncio.ensure_future(
+        self._background(
             self.daemon.notify("motion", xy_speed_mm_s=round(speed_mm_s, 2), state=state)
         )
-        self._reports.add(task)
-        task.add_done_callback(self._reports.discard)
 
     def _on_daemon_offline(self) -> None:
         # Torch and Z are the daemon's: without it, motion must not go on with a cut.
@@ -275,6 +274,8 @@ class Sender:
         report.dialect = str(dialect)
         shop_codes = started.get("codes")
         table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
+        # Counted on a plan of its own: the running plan's NGC reads the daemon's answers
+        # (cut-feed-rate after an M190), so its steps cannot be listed ahead.
         self.progress.total_cuts = count_cuts(ProgramPlan(lines, dialect, table))
         plan = ProgramPlan(lines, dialect, table)
         self._note_cut_feed(started, plan)
@@ -326,21 +327,21 @@ class Sender:
         except DaemonError as exc:  # gone: its board's lease has turned the torch off
             log.error("abort_failed", error=str(exc))
 
-    async def _unless_paused(self, work: Coroutine[Any, Any, object]) -> None:
-        """``work`` (a queue waiting for room in the controller's buffer), given up when the
-        program pauses meanwhile."""
+    async def _unless_paused(self, work: Coroutine[Any, Any, _T]) -> _T | None:
+        """``work``'s result (a queue waiting for room in the controller's buffer, a wait for
+        idle), or None: given up when the program pauses meanwhile."""
         task = asyncio.ensure_future(work)
         paused = asyncio.ensure_future(self._pause.wait())
         try:
             await asyncio.wait({task, paused}, return_when=asyncio.FIRST_COMPLETED)
         finally:
             paused.cancel()
-        if not task.done():
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-            return
-        task.result()
+        if task.done():
+            return task.result()
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+        return None
 
     async def _hold(self) -> None:
         try:
@@ -416,16 +417,8 @@ class Sender:
 
     async def _wait_motion(self) -> tuple[float, float]:
         """Wait for queued motion to finish, unless the daemon asks for a pause meanwhile."""
-        idle = asyncio.ensure_future(self.backend.wait_idle())
-        paused = asyncio.ensure_future(self._pause.wait())
-        try:
-            await asyncio.wait({idle, paused}, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            paused.cancel()
-        if idle.done():
-            return idle.result()
-        idle.cancel()
-        return (float("nan"), float("nan"))
+        xy = await self._unless_paused(self.backend.wait_idle())
+        return (float("nan"), float("nan")) if xy is None else xy
 
 
 class RestartPosition:
