@@ -99,7 +99,7 @@ class ControllerService:
         # The sender's measured XY speed (``motion`` request) and the board time it came at:
         # the anti-dive input when the board has no XY speed input of its own.
         self._host_speed: tuple[float, float] | None = None
-        self._last_board_xy: float | None = None  # board time of its last own XY speed
+        self._board_has_xy = False  # it reported an XY speed of its own: the host's is moot
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self._torch_off: asyncio.Task[None] | None = None
@@ -186,7 +186,7 @@ class ControllerService:
             speed, feed, state = parse_host_motion(args)
         except CommandError as exc:
             return CommandResult(False, error=str(exc))
-        used = self._last_board_xy is None
+        used = not self._board_has_xy
         if used:
             self._host_speed = (speed, self.now)
             if feed is not None:
@@ -448,8 +448,7 @@ class ControllerService:
     def _on_board(self, item: Telemetry, t_s: float) -> None:
         sequence = self.sequence
         if isinstance(item, fp.Samples):
-            if item.has_xy_speed:
-                self._last_board_xy = t_s
+            self._board_has_xy = self._board_has_xy or item.has_xy_speed
             z_mm, xy = feed_samples(
                 sequence, item, t_s, self._requested_feed_mm_s, self._host_speed_now(t_s)
             )
