@@ -6,9 +6,7 @@ from __future__ import annotations
 
 import json
 import re
-import signal
 import socket
-import subprocess
 import sys
 import time
 from collections import deque
@@ -18,7 +16,7 @@ from typing import Any
 import pytest
 import serial
 
-from dthc_tools.procs import die_with_parent
+from tests.grbl_emu.processes import exit_line, start_ready, stop
 
 pytestmark = pytest.mark.slow
 
@@ -135,46 +133,10 @@ class GrblClient:
         raise AssertionError(f"never idle: {self.reports[-3:]}")
 
 
-def _start(cmd: list[str], log: Path) -> tuple[subprocess.Popen[str], str]:
-    """Start a process that prints READY on stdout; the process and that line."""
-    with log.open("w") as stderr:
-        proc = subprocess.Popen(
-            cmd,
-            stdout=subprocess.PIPE,
-            stderr=stderr,
-            text=True,
-            preexec_fn=die_with_parent(),
-        )
-    assert proc.stdout is not None
-    ready = proc.stdout.readline()
-    assert ready.startswith("READY"), ready + log.read_text()
-    return proc, ready.strip()
-
-
-def _stop(proc: subprocess.Popen[str]) -> int:
-    proc.send_signal(signal.SIGTERM)
-    try:
-        return proc.wait(5)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        if proc.stdout is not None:
-            proc.stdout.close()
-
-
-def _exit_line(log: Path) -> dict[str, Any]:
-    events = [json.loads(line) for line in log.read_text().splitlines() if line.startswith("{")]
-    exits = [e for e in events if e["event"] == "exit"]
-    assert exits, log.read_text()
-    exit_line: dict[str, Any] = exits[-1]
-    return exit_line
-
-
 def _run_program(tmp_path: Path, *extra: str) -> tuple[GrblClient, dict[str, str], Path]:
     pty = tmp_path / "grbl0"
     log = tmp_path / "emu.log"
-    proc, ready = _start(
+    proc, ready = start_ready(
         [sys.executable, "-m", "dthc_tools.grbl_emu", "--pty", str(pty), *extra], log
     )
     assert ready == f"READY pty={pty}"
@@ -193,7 +155,7 @@ def _run_program(tmp_path: Path, *extra: str) -> tuple[GrblClient, dict[str, str
             client.stream(PROGRAM, int(rx))
             final = client.poll_until_idle(int(blocks), int(rx))
     finally:
-        assert _stop(proc) == 0
+        assert stop(proc) == 0
     return client, final, log
 
 
@@ -207,7 +169,7 @@ def test_streaming_a_program_by_character_counting_over_a_real_pty(tmp_path: Pat
     assert states[-1] == "Idle"
     assert final["MPos"] == f"{FINAL_XY[0]:.3f},{FINAL_XY[1]:.3f},0.000"
     assert any(r["Bf"].startswith("0,") for r in client.reports)  # the planner filled up
-    stats = _exit_line(log)
+    stats = exit_line(log)
     assert stats["rx_overflow"] == 0
     assert stats["lines"] == 1 + len(PROGRAM)
     assert stats["errors"] == {}
@@ -227,7 +189,7 @@ def _gantry_request(port: int, op: str) -> dict[str, Any]:
 def test_the_mock_boards_gantry_follows_the_emulator(tmp_path: Path) -> None:
     """With ``--plant``, the mock board's gantry runs the same moves: it ends where the
     emulator ends, having been told every line (and nothing refused)."""
-    mock, ready = _start(
+    mock, ready = start_ready(
         [sys.executable, "-m", "mock_device", "--pty", str(tmp_path / "dthc0"),
          "--gantry-listen", "socket://127.0.0.1:0"],
         tmp_path / "mock.log",
@@ -237,11 +199,11 @@ def test_the_mock_boards_gantry_follows_the_emulator(tmp_path: Path) -> None:
         _, final, log = _run_program(tmp_path, "--plant", f"socket://127.0.0.1:{gantry_port}")
         plant = _gantry_request(gantry_port, "wait_idle")
     finally:
-        _stop(mock)
+        stop(mock)
     x, y, _ = (float(v) for v in final["MPos"].split(","))
     assert (x, y) == FINAL_XY
     assert plant["x"] == pytest.approx(x, abs=1e-3)
     assert plant["y"] == pytest.approx(y, abs=1e-3)
-    stats = _exit_line(log)
+    stats = exit_line(log)
     assert stats["plant"]["sent"] >= stats["moves"]  # every line, and the reset's clear
     assert (stats["plant"]["refused"], stats["plant"]["dropped"]) == (0, 0)

@@ -4,9 +4,6 @@ character counting, ok/error/ALARM, hold/resume/clear, and what never reaches gr
 from __future__ import annotations
 
 import asyncio
-import json
-import signal
-import subprocess
 import sys
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -14,9 +11,9 @@ from typing import Any
 
 import pytest
 
-from dthc_tools.procs import die_with_parent
 from dthc_tools.sender.backend import BackendError
 from dthc_tools.sender.grbl_backend import GrblBackend
+from tests.grbl_emu.processes import exit_line, start_ready, stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 
@@ -27,31 +24,17 @@ class Grbl:
     def __init__(self, tmp_path: Path, *args: str) -> None:
         self.pty = tmp_path / "grbl0"
         self.log = tmp_path / "grbl.log"
-        self._log = self.log.open("w")
-        self.proc = subprocess.Popen(
+        self.proc, _ = start_ready(
             [sys.executable, "-m", "dthc_tools.grbl_emu", "--pty", str(self.pty), *args],
-            stdout=subprocess.PIPE, stderr=self._log, text=True,
-            preexec_fn=die_with_parent(),
-        )  # fmt: skip
-        assert self.proc.stdout is not None
-        assert self.proc.stdout.readline().startswith("READY")
+            self.log,
+        )
 
     async def stats(self) -> dict[str, Any]:
-        self.proc.send_signal(signal.SIGTERM)
-        await asyncio.to_thread(self.proc.wait, 10)
-        for line in self.log.read_text().splitlines():
-            if '"event": "exit"' in line:
-                exit_line: dict[str, Any] = json.loads(line)
-                return exit_line
-        raise AssertionError("no exit line")
+        await asyncio.to_thread(stop, self.proc)
+        return exit_line(self.log)
 
     def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5)
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-        self._log.close()
+        stop(self.proc)
 
 
 @pytest.fixture
