@@ -96,8 +96,13 @@ def test_no_arc_after_three_attempts_faults_and_pauses_the_sender() -> None:
 
 def assert_arc_lost_fault_path(loop: ClosedLoop) -> None:
     """Invariant 3 after an arc loss: torch off, pause requested, Z up, re-arm required."""
-    assert loop.sequence.error == "arc lost"
-    assert loop.pauses == ["arc lost"]
+    assert_fault_path(loop, "arc lost")
+
+
+def assert_fault_path(loop: ClosedLoop, reason: str) -> None:
+    """Invariant 3: torch off, pause requested, Z up, re-arm required, naming ``reason``."""
+    assert loop.sequence.error == reason
+    assert loop.pauses == [reason]
     loop.run_until(lambda: loop.plant.zaxis.is_idle, 5)
     assert not loop.plant.torch_on
     assert loop.plant.zaxis.position_mm >= loop.sequence.safe_z_mm - 0.01
@@ -114,6 +119,40 @@ def test_arc_lost_mid_cut_turns_the_torch_off_and_raises_z() -> None:
     assert_arc_lost_fault_path(loop)
     assert loop.request("rearm").ok
     assert loop.sequence.state is State.IDLE
+
+
+def test_the_operators_stop_mid_cut_takes_the_fault_path() -> None:
+    """``abort`` (the console's stop): the cut ends as a fault does, never silently."""
+    loop = ready()
+    assert loop.m3().ok
+    loop.plant.gantry.feed_line("G1 X400 Y50 F5500")
+    loop.run_until(lambda: False, 0.3)
+    assert loop.plant.torch_on
+    stopped = loop.request("abort")
+    assert stopped.ok
+    assert stopped.data == {"aborted": True}
+    assert_fault_path(loop, "stopped by the operator")
+
+
+def test_the_operators_stop_during_the_start_answers_the_pending_m3() -> None:
+    """A stop while M3 is still piercing: that M3 gets the error as its one answer."""
+    loop = ready()
+    m3 = loop.submit("M3")
+    assert loop.run_until(lambda: loop.plant.torch_on, 20)
+    assert not m3.done()
+    assert loop.request("abort").ok
+    assert loop.run_until(m3.done, 5)
+    assert not m3.result().ok
+    assert m3.result().error == "stopped by the operator"
+    assert not loop.plant.torch_on
+    assert loop.sequence.state is State.FAULTED
+
+
+def test_a_stop_with_no_cut_running_changes_nothing() -> None:
+    loop = ready()
+    assert loop.request("abort").data == {"aborted": False}
+    assert loop.sequence.state is State.IDLE
+    assert loop.pauses == []
 
 
 def test_breakaway_mid_cut_faults() -> None:
