@@ -18,6 +18,7 @@ __all__ = [
     "LinkChanged",
     "ProgramPaused",
     "ResumePointMarked",
+    "SequenceChanged",
 ]
 
 
@@ -75,6 +76,17 @@ class LinkChanged(ControllerEvent):
     type: ClassVar[str] = "link"
     state: str
     reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class SequenceChanged(ControllerEvent):
+    """The cut sequence entered another state, at the board time it did: what a cut record
+    (an operator panel's history) is built from, exact where the 10 Hz telemetry is not."""
+
+    type: ClassVar[str] = "sequence"
+    state: str
+    previous: str
+    error: str  # the fault's reason when ``state`` is ``faulted``, else ""
 
 
 @dataclass(frozen=True, slots=True)

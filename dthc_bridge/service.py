@@ -40,6 +40,7 @@ from .events import (
     LinkChanged,
     ProgramPaused,
     ResumePointMarked,
+    SequenceChanged,
 )
 from .link import LinkError, LinkState, LinkStateChange, LinkSupervisor
 from .materials import (
@@ -104,6 +105,8 @@ class ControllerService:
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self._torch_off: asyncio.Task[None] | None = None
         self._torch_off_sent_s = -math.inf
+        # Published as a ``sequence`` event whenever it changes.
+        self._state_seen = str(controller.sequence.state)
         client.add_listener(self._on_board)
         client.add_state_listener(self._on_link_state)
         client.add_error_listener(self._on_handler_error)
@@ -274,9 +277,17 @@ class ControllerService:
             # While a steady slow-down is followed: the voltage it is held at.
             "slow_target_v": thc.slow_target_v,
             "z_mm": z_mm,
+            # Above the surface this cut probed (None between cuts): what the THC holds.
+            "height_mm": self._height_mm(z_mm),
             "xy_speed_mm_s": xy,
             "locks": sorted(str(lock) for lock in thc.locks(t)),
         }
+
+    def _height_mm(self, z_mm: float) -> float | None:
+        cut = self.sequence.cut
+        if cut is None or math.isnan(cut.zero_mm) or math.isnan(z_mm):
+            return None
+        return round(z_mm - cut.zero_mm, 3)
 
     def add_event_listener(self, listener: EventListener) -> None:
         """Every event, synchronously, as it happens."""
@@ -374,6 +385,11 @@ class ControllerService:
                     self._publish_event(ProgramPaused(self.now, action.reason, str(action.cause)))
             else:
                 self._work.put_nowait(action)
+        state = str(self.sequence.state)
+        if state != self._state_seen:
+            error = self.sequence.error if state == "faulted" else ""
+            self._publish_event(SequenceChanged(self.now, state, self._state_seen, error))
+            self._state_seen = state
 
     def _send_velocity(self, velocity_mm_s: float) -> None:
         try:

@@ -685,6 +685,14 @@ def _thc_hold(name: str, args: Mapping[str, object]) -> Command:
     return ThcHold(on)
 
 
+def _thc_switch(name: str, args: Mapping[str, object]) -> Command:
+    """The operator's THC on/off (a panel's switch): M667 / M666 without a program line."""
+    on = args.get("on")
+    if not isinstance(on, bool):
+        raise CommandError(f"{name} on", f"{on!r} is not true or false")
+    return ThcEnable(on)
+
+
 def _ohmic_test(_name: str, _args: Mapping[str, object]) -> Command:
     return OhmicTest()
 
@@ -713,6 +721,7 @@ _REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]],
     "cycle_start": (frozenset(), _cycle_start),
     "rearm": (frozenset(), _rearm),
     "thc_hold": (frozenset({"on"}), _thc_hold),
+    "thc": (frozenset({"on"}), _thc_switch),
     "abort": (frozenset(), _abort),
     "height_override": (frozenset({"mm", "reset"}), _height_override),
     "ohmic_test": (frozenset(), _ohmic_test),

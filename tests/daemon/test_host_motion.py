@@ -10,6 +10,7 @@ import pytest
 import firmware_protocol as fp
 from dthc_bridge.controller.sequence import CutSequence
 from dthc_bridge.controller.thc import Lock, ThcController
+from dthc_bridge.events import ControllerEvent
 from dthc_bridge.service import HOST_SPEED_STALE_S, ControllerService, feed_samples
 from tests.daemon.test_material_requests import service_for
 
@@ -107,3 +108,33 @@ def test_a_held_thc_commands_no_z_motion() -> None:
     assert free.velocity_mm_s != 0.0
     assert held_output.velocity_mm_s == 0.0
     assert Lock.HELD in held_output.locks
+
+
+async def test_the_operators_thc_switch_turns_the_thc_on_and_off(
+    service: ControllerService,
+) -> None:
+    """``thc`` {on}: a panel's THC on/off, as M667 / M666 without a program line."""
+    assert (await service.execute_request("thc", {"on": True})).ok
+    assert service.sequence.thc_enabled
+    assert (await service.execute_request("thc", {"on": False})).ok
+    assert not service.sequence.thc_enabled
+    refused = await service.execute_request("thc", {"on": 1})
+    assert refused.error == "thc on: 1 is not true or false"
+    assert not service.sequence.thc_enabled
+
+
+async def test_each_change_of_the_sequence_state_is_an_event_at_its_board_time(
+    service: ControllerService,
+) -> None:
+    """What a panel's cut history is built from: ``sequence`` {state, previous, error}."""
+    seen: list[ControllerEvent] = []
+    service.add_event_listener(seen.append)
+    service.pump()
+    assert seen == []  # no change, no event
+    service.sequence.abort("stopped by the operator")  # idle -> nothing to abort
+    service.sequence._fault("arc lost")
+    service.pump()
+    payloads = [e.as_payload() for e in seen if e.type == "sequence"]
+    assert payloads == [
+        {"t": 0.0, "type": "sequence", "state": "faulted", "previous": "idle", "error": "arc lost"}
+    ]
