@@ -41,7 +41,7 @@ class CountingClient(DaemonClient):
     lost = 0
     interrupted = 0
 
-    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         try:
             result = await super().request(name, **args)
         except DaemonError as exc:

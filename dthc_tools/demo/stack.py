@@ -341,7 +341,7 @@ class Stack:
         finally:
             await backend.close()
 
-    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         daemon = self.daemon_client()
         async with daemon.connected():
             return await daemon.request(name, **args)

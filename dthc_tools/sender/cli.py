@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import sys
 from collections.abc import Sequence
@@ -17,6 +18,7 @@ from .backend import BackendError, MotionBackend, SimGantryBackend
 from .console import OperatorConsole
 from .daemon_client import DaemonClient
 from .grbl_backend import GrblBackend
+from .remote import OperatorRemote
 from .sender import Sender
 
 __all__ = ["build_parser", "main"]
@@ -88,13 +90,20 @@ async def _send(args: argparse.Namespace) -> int:
         host, port, base_topic=args.base_topic, board_id=args.board_id, protocol=args.protocol
     )
     backend = await _backend(args)
+    sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
+    remote = OperatorRemote(sender, daemon, program=str(args.program))  # a panel's controls
     try:
         async with daemon.connected():
-            sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
             console = OperatorConsole(sender, interactive=_interactive() and not args.json)
-            report = await console.run_job(
-                lines, start_line=args.start_line, dialect=args.dialect, codes=args.codes
-            )
+            progress = asyncio.create_task(remote.publish_progress())
+            try:
+                report = await console.run_job(
+                    lines, start_line=args.start_line, dialect=args.dialect, codes=args.codes
+                )
+            finally:
+                progress.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await progress
     finally:
         await backend.close()
     if args.json:

@@ -17,10 +17,13 @@ import structlog
 
 from dthc_bridge.backoff import backoff_delay_s
 
-__all__ = ["DaemonClient", "DaemonError"]
+__all__ = ["INVALID", "DaemonClient", "DaemonError"]
 
 log = structlog.get_logger("dthc_tools.sender")
 
+INVALID = "__invalid__"  # what a subscription's handler gets for a payload that is not JSON
+OFFLINE = b'{"state":"offline"}'
+ONLINE = b'{"state":"online"}'
 OFFLINE_CONFIRM_S = 0.25
 """How long an offline availability waits for our own disconnection before it counts as the
 daemon's death: a broker shutting down sends the daemon's will, then drops us in ms."""
@@ -54,17 +57,24 @@ class DaemonClient:
         timeout_s: float = 60.0,
         reconnect_initial_s: float = 0.2,
         reconnect_max_s: float = 5.0,
+        role: str = "sender",
     ) -> None:
         self.root = f"{base_topic}/{board_id}"
         self.timeout_s = timeout_s
         self.reconnect_initial_s = reconnect_initial_s
         self.reconnect_max_s = reconnect_max_s
         version = aiomqtt.ProtocolVersion.V5 if protocol == "5" else aiomqtt.ProtocolVersion.V311
-        identifier = f"dthc-sender-{uuid.uuid4().hex[:8]}"
+        identifier = f"dthc-{role}-{uuid.uuid4().hex[:8]}"
+        # The sender's own availability (its will says offline): a panel shows whether a
+        # program runs, and a daemon configured with sender_will_topic stops a cut at once.
+        self.availability_topic = f"{self.root}/{role}/availability"
+        will = aiomqtt.Will(self.availability_topic, OFFLINE, qos=1, retain=True)
         self._new_client = functools.partial(
             aiomqtt.Client, host, port, protocol=version, username=username,
-            password=password, identifier=identifier, timeout=10.0,
+            password=password, identifier=identifier, timeout=10.0, will=will,
         )  # fmt: skip
+        self.role = role
+        self._subscriptions: dict[str, Callable[[str, dict[str, Any]], None]] = {}
         self._client: aiomqtt.Client | None = None  # while connected and subscribed
         self._ids = itertools.count(1)
         # Transactions are unique per run: the daemon answers a repeated transaction from
@@ -89,6 +99,15 @@ class DaemonClient:
         self._online = asyncio.Event()
         self._gone = asyncio.Event()  # its will came and no broker restart explains it
 
+    @property
+    def broker_connected(self) -> bool:
+        return self._client is not None
+
+    @property
+    def daemon_online(self) -> bool:
+        """The daemon's availability said online (retained; its will says offline)."""
+        return self._online.is_set()
+
     @contextlib.asynccontextmanager
     async def connected(self) -> AsyncIterator[DaemonClient]:
         """Connected for the block; the first connection must succeed (else its
@@ -99,6 +118,10 @@ class DaemonClient:
             await first
             yield self
         finally:
+            client = self._client
+            if client is not None:  # a clean end is not a death: say so before leaving
+                with contextlib.suppress(aiomqtt.MqttError):
+                    await client.publish(self.availability_topic, OFFLINE, qos=1, retain=True)
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError, aiomqtt.MqttError):
                 await self._task
@@ -112,6 +135,9 @@ class DaemonClient:
                 async with self._new_client() as client:
                     for leaf in ("response/#", "event", "availability", "telemetry"):
                         await client.subscribe(f"{self.root}/{leaf}", qos=1)
+                    for leaf in self._subscriptions:
+                        await client.subscribe(f"{self.root}/{leaf}", qos=1)
+                    await client.publish(self.availability_topic, ONLINE, qos=1, retain=True)
                     self._client = client
                     self._broker_lost.clear()
                     if first.done():
@@ -175,6 +201,20 @@ class DaemonClient:
         """Each telemetry point (arc voltage, height, state) as the daemon publishes it."""
         self._telemetry_handlers.append(handler)
 
+    def on_topic(self, leaf: str, handler: Callable[[str, dict[str, Any]], None]) -> None:
+        """Another topic under the board's (``sender/request/+``, ``state``): its JSON
+        documents with their topic, from the next connection on (call before connecting)."""
+        self._subscriptions[leaf] = handler
+
+    async def publish(self, leaf: str, document: dict[str, Any], *, retain: bool = False) -> None:
+        """A document of ours under the board's topics (QoS 1); dropped while the broker is
+        away: what is published here is a state, and the next one replaces it."""
+        client = self._client
+        if client is None:
+            return
+        with contextlib.suppress(aiomqtt.MqttError):
+            await client.publish(f"{self.root}/{leaf}", json.dumps(document), qos=1, retain=retain)
+
     def on_offline(self, handler: Callable[[], None]) -> None:
         """The daemon's availability turned offline (killed, crashed or stopped)."""
         self._offline_handlers.append(handler)
@@ -193,8 +233,10 @@ class DaemonClient:
             try:
                 document = json.loads(bytes(message.payload))
             except ValueError:
-                continue
+                document = None
             if not isinstance(document, dict):
+                # A request to us still gets its one answer: an error saying why.
+                self._dispatch(message.topic, {INVALID: "the payload is not a JSON object"})
                 continue
             if message.topic.matches(f"{self.root}/availability"):
                 if document.get("state") == "online":
@@ -220,11 +262,25 @@ class DaemonClient:
                 for handler in self._telemetry_handlers:
                     handler(document)
                 continue
-            transaction = str(document.get("transaction"))
-            self._unanswered.pop(transaction, None)
-            waiter = self._waiting.pop(transaction, None)
-            if waiter is not None and not waiter.done():
-                waiter.set_result(document)
+            if self._dispatch(message.topic, document):
+                continue
+            self.answer(message.topic.value, document)
+
+    def answer(self, _topic: str, document: dict[str, Any]) -> None:
+        """A response: to the request waiting for its transaction (``on_topic`` handler for
+        another client's responses, as ``sender/response/+``)."""
+        transaction = str(document.get("transaction"))
+        self._unanswered.pop(transaction, None)
+        waiter = self._waiting.pop(transaction, None)
+        if waiter is not None and not waiter.done():
+            waiter.set_result(document)
+
+    def _dispatch(self, topic: aiomqtt.Topic, document: dict[str, Any]) -> bool:
+        for leaf, handler in self._subscriptions.items():
+            if topic.matches(f"{self.root}/{leaf}"):
+                handler(topic.value, document)
+                return True
+        return False
 
     async def _wait_online(self, name: str) -> None:
         """Until the daemon is online; a daemon that died meanwhile fails it at once."""
@@ -244,8 +300,9 @@ class DaemonClient:
             raise DaemonError(f"{name}: the daemon went offline")
         raise DaemonError(f"{name}: the daemon is not online")
 
-    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         """Publish a request, wait for its response; DaemonError on an error response.
+        (``name`` is positional-only: a material's fields include a ``name``.)
 
         A broker restart meanwhile is ridden out: the request is published again, with
         the same transaction, once the connection is back."""
@@ -272,7 +329,33 @@ class DaemonClient:
         data: dict[str, Any] = response.get("data") or {}
         return data
 
-    async def notify(self, name: str, **args: Any) -> None:
+    async def request_to(self, role: str, name: str, /, **args: Any) -> dict[str, Any]:
+        """A request to another client of the board (``sender``): published once, answered
+        on ``<role>/response/<name>`` (subscribe it with ``on_topic(..., self.answer)``);
+        DaemonError on an error response or none within the timeout."""
+        client = self._client
+        if client is None:
+            raise DaemonError(f"{name}: not connected to the broker")
+        transaction = f"{self._run_id}-{next(self._ids)}"
+        future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
+        self._waiting[transaction] = future
+        payload = json.dumps({**args, "transaction": transaction})
+        try:
+            await client.publish(f"{self.root}/{role}/request/{name}", payload, qos=1)
+            response = await asyncio.wait_for(future, self.timeout_s)
+        except TimeoutError:
+            raise DaemonError(f"{name}: the {role} did not answer within "
+                              f"{self.timeout_s:.0f} s") from None  # fmt: skip
+        except aiomqtt.MqttError as exc:
+            raise DaemonError(f"{name}: {exc}") from None
+        finally:
+            self._waiting.pop(transaction, None)
+        if response.get("status") != "ok":
+            raise DaemonError(str(response.get("error") or "error"))
+        data: dict[str, Any] = response.get("data") or {}
+        return data
+
+    async def notify(self, name: str, /, **args: Any) -> None:
         """A report, not a command: published at QoS 0 without a transaction, its answer not
         awaited, never re-sent (a stale ``motion`` speed is worse than none: the daemon
         counts a missing one as unknown and holds the THC)."""

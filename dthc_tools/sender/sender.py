@@ -183,6 +183,8 @@ class Sender:
             self.progress.operator_paused = False
             self._go.set()
             log.info("resumed_by_operator", line=self.progress.line)
+        else:
+            raise BackendError("nothing waits for cycle start (no S1 stop, no pause)")
 
     async def pause(self) -> None:
         """Feed hold and THC hold; the program goes on after cycle start."""

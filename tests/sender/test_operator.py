@@ -38,7 +38,7 @@ class S1Daemon(FakeDaemon):
     def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
         self.handlers.append(handler)
 
-    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         self.args.append((name, args))
         if name == "cycle_start":
             self.released.set()
@@ -157,7 +157,7 @@ async def test_a_restart_from_a_line_positions_xy_first() -> None:
 
 async def test_a_failing_key_is_shown_not_raised() -> None:
     class Refusing(FakeDaemon):
-        async def request(self, name: str, **args: Any) -> dict[str, Any]:
+        async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
             raise DaemonError(f"{name}: nothing waits for cycle start (idle)")
 
     sender = Sender(cast(DaemonClient, Refusing()), FakeBackend())

@@ -24,7 +24,7 @@ class FakeDaemon:
         self.started = {"material": 0, "cut_feed_mm_min": 3000.0, "dialect": "masso",
                         "codes": {}, **(started or {})}  # fmt: skip
 
-    async def request(self, name: str, **args: Any) -> dict[str, Any]:
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         self.requests.append(name)
         return dict(self.started) if name == "program_start" else {}
 

@@ -1,0 +1,116 @@
+"""The operator's controls over MQTT: what the console's keys do, for a panel on the network.
+
+The sender owns the motion, so pause, cycle start and stop go through it, not straight to
+the daemon: a pause is a feed hold *and* a THC hold, a stop holds the motion *and* ends the
+cut. The sender answers on its own topics, next to the daemon's:
+
+    <base>/<board>/sender/request/<name>    {"transaction": ..., ...args}   (QoS 1, never retained)
+    <base>/<board>/sender/response/<name>   {"status": "ok"|"error", "data", "error", "transaction"}
+    <base>/<board>/sender/progress          retained: line n/N, cut n/m, waiting, paused, error
+    <base>/<board>/sender/availability      retained: {"state": "online"}; its will says offline
+
+Names: ``cycle_start``, ``pause``, ``stop``, ``feed_override`` {step: "+10"|"-10"|"reset"}.
+Every request gets exactly one response, an unknown name or argument an error naming it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import Awaitable, Callable
+from dataclasses import asdict
+from pathlib import PurePosixPath
+from typing import Any
+
+import structlog
+
+from .backend import BackendError
+from .daemon_client import INVALID, DaemonClient, DaemonError
+from .sender import Sender
+
+__all__ = ["PROGRESS_PERIOD_S", "OperatorRemote"]
+
+log = structlog.get_logger("dthc_tools.sender.remote")
+
+PROGRESS_PERIOD_S = 0.2
+"""Progress goes out on change, at most this often: a program line at cutting feed takes
+longer than this, and a panel redraws at about this rate."""
+FEED_STEPS = ("+10", "-10", "reset")
+
+
+class OperatorRemote:
+    """Serves ``sender/request/+`` and publishes ``sender/progress`` for one sender."""
+
+    def __init__(self, sender: Sender, client: DaemonClient, *, program: str = "") -> None:
+        self.sender = sender
+        self.client = client
+        self.program = PurePosixPath(program).name
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._actions: dict[str, Callable[[dict[str, Any]], Awaitable[None]]] = {
+            "cycle_start": lambda _args: sender.cycle_start(),
+            "pause": lambda _args: sender.pause(),
+            "stop": lambda _args: sender.stop(),
+            "feed_override": self._feed_override,
+        }
+        client.on_topic("sender/request/+", self._on_request)
+
+    def _on_request(self, topic: str, document: dict[str, Any]) -> None:
+        name = topic.rsplit("/", 1)[-1]
+        task = asyncio.ensure_future(self._serve(name, document))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _serve(self, name: str, document: dict[str, Any]) -> None:
+        transaction = document.get("transaction")
+        args = {k: v for k, v in document.items() if k != "transaction"}
+        response: dict[str, Any] = {"status": "ok", "data": {}, "transaction": transaction}
+        action = self._actions.get(name)
+        try:
+            if INVALID in document:
+                raise BackendError(f"{name}: {document[INVALID]}")
+            if action is None:
+                raise BackendError(f"{name}: unknown sender request")
+            await action(args)
+        except (BackendError, DaemonError) as exc:
+            response.update(status="error", error=str(exc))
+        log.info("operator_request", name=name, status=response["status"],
+                 error=response.get("error"))  # fmt: skip
+        await self.client.publish(f"sender/response/{name}", response)
+
+    async def _feed_override(self, args: dict[str, Any]) -> None:
+        step = args.get("step")
+        unknown = sorted(set(args) - {"step"})
+        if unknown:
+            raise BackendError(f"feed_override {unknown[0]}: unknown argument")
+        if step not in FEED_STEPS:
+            raise BackendError(f"feed_override step: {step!r} is not one of {FEED_STEPS}")
+        self.sender.feed_override(str(step))
+
+    def progress(self) -> dict[str, Any]:
+        report = self.sender.report
+        return {
+            **asdict(self.sender.progress),
+            "program": self.program,
+            "error": report.error,
+            "error_line": report.error_line,
+            "restart_line": report.restart_line,
+        }
+
+    async def publish_progress(self) -> None:
+        """Until cancelled: the progress whenever it changed, at most every PROGRESS_PERIOD_S;
+        the last one (program ended) on the way out."""
+        last = ""
+        try:
+            while True:
+                document = self.progress()
+                text = json.dumps(document, sort_keys=True)
+                if text != last:
+                    await self.client.publish("sender/progress", document, retain=True)
+                    last = text
+                await asyncio.sleep(PROGRESS_PERIOD_S)
+        finally:
+            with contextlib.suppress(Exception):
+                await asyncio.shield(
+                    self.client.publish("sender/progress", self.progress(), retain=True)
+                )
