@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker systemd-tools clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,14 @@ broker:
 	  echo "installing mosquitto and mosquitto-clients (apt-get)"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq mosquitto mosquitto-clients >/dev/null; }
+
+# The operator panel is tested in a real browser: Debian's chromium, driven through its
+# chromedriver; install them where they are missing.
+browser:
+	@{ command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; } || { \
+	  echo "installing chromium and chromium-driver (apt-get)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver >/dev/null; }
 
 # Unit checks run systemd-analyze on the service file; install it where it is missing.
 systemd-tools:
@@ -41,7 +49,7 @@ typecheck: $(STAMP)
 unit: $(STAMP)
 	$(BIN)/pytest -q
 
-test: $(STAMP) broker systemd-tools lint typecheck unit
+test: $(STAMP) broker browser systemd-tools lint typecheck unit
 
 bench: $(STAMP)
 	for suite in codec control latency soak scale; do $(BIN)/dthc-bridge bench $$suite --json; done

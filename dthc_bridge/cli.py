@@ -105,6 +105,9 @@ TOOL_COMMANDS = {
     "send": ToolCommand(
         "dthc_tools.sender.cli", "sender", "send a G-code program to the daemon (reference sender)"
     ),
+    "panel": ToolCommand(
+        "dthc_tools.panel.cli", "panel", "the operator panel: a web page beside the table"
+    ),
     "bench": ToolCommand(
         "dthc_tools.bench.cli", "bench", "benchmark suites: codec, latency, control, soak, scale"
     ),

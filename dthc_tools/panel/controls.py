@@ -1,0 +1,151 @@
+"""The panel's controls: which request each one is, and whether the state allows it now.
+
+One table, read by the server (where a press goes) and sent to the page with every view
+(which buttons are enabled, and why not). The daemon and the sender stay the authority: a
+control that reaches them when their state does not allow it is refused there with their
+reason, which the page shows."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["CONTROLS", "Control", "ControlError", "LiveView", "enabled", "route"]
+
+TORCH_STEP_V = 1.0
+HEIGHT_STEP_MM = 0.1
+IDLE_STATES = frozenset({"idle", "faulted"})
+
+
+class ControlError(Exception):
+    """A press the panel cannot deliver (no sender runs, an argument is wrong)."""
+
+
+@dataclass
+class LiveView:
+    """What the panel knows of the table, from the retained topics and the connection."""
+
+    broker: bool = False  # the panel's own connection
+    daemon: bool = False  # its availability says online
+    board: str = "unknown"  # online / offline / connecting / incompatible
+    state: Mapping[str, Any] | None = None  # the daemon's state document
+    sender: bool = False  # a sender is online (its availability)
+    progress: Mapping[str, Any] | None = None  # the sender's progress document
+    materials: Mapping[str, Any] | None = None
+
+    @property
+    def sequence(self) -> str:
+        return str((self.state or {}).get("state", "unknown"))
+
+    @property
+    def running(self) -> bool:
+        """A sender runs a program."""
+        return self.sender and bool((self.progress or {}).get("running"))
+
+
+@dataclass(frozen=True)
+class Control:
+    role: str  # "daemon" or "sender": who answers it
+    request: str
+    args: Callable[[Mapping[str, Any]], dict[str, Any]]
+    needs_board: bool = True
+
+
+def _none(_args: Mapping[str, Any]) -> dict[str, Any]:
+    return {}
+
+
+def _fixed(**values: Any) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    return lambda _args: dict(values)
+
+
+def _material(args: Mapping[str, Any]) -> dict[str, Any]:
+    """The material's fields as the page sent them; the daemon validates each one."""
+    if "number" not in args:
+        raise ControlError("material number: required")
+    return dict(args)
+
+
+def _material_number(args: Mapping[str, Any]) -> dict[str, Any]:
+    if "number" not in args:
+        raise ControlError("material number: required")
+    return {"number": args["number"]}
+
+
+CONTROLS: dict[str, Control] = {
+    "torch_up": Control("daemon", "torch_up", _fixed(volts=TORCH_STEP_V)),
+    "torch_down": Control("daemon", "torch_down", _fixed(volts=TORCH_STEP_V)),
+    "height_up": Control("daemon", "height_override", _fixed(mm=HEIGHT_STEP_MM)),
+    "height_down": Control("daemon", "height_override", _fixed(mm=-HEIGHT_STEP_MM)),
+    "thc_on": Control("daemon", "thc", _fixed(on=True)),
+    "thc_off": Control("daemon", "thc", _fixed(on=False)),
+    "cycle_start": Control("sender", "cycle_start", _none),
+    "pause": Control("sender", "pause", _none),
+    "stop": Control("sender", "stop", _none),
+    "rearm": Control("daemon", "rearm", _none),
+    "material_set": Control("daemon", "material_set", _material, needs_board=False),
+    "material_delete": Control("daemon", "material_delete", _material_number, needs_board=False),
+}
+
+
+def _offline_reason(view: LiveView, control: Control) -> str | None:
+    if not view.broker:
+        return "the broker is unreachable"
+    if not view.daemon:
+        return "the daemon is offline"
+    if control.needs_board and view.board != "online":
+        return f"the board is {view.board}"
+    return None
+
+
+def _state_reason(name: str, view: LiveView) -> str | None:
+    """Why the state does not allow ``name`` now (None: it does)."""
+    progress = view.progress or {}
+    sequence = view.sequence
+    if name == "cycle_start":
+        if view.running:  # the sender says: the daemon's state runs ahead of its progress
+            waiting = progress.get("waiting_cycle_start") or progress.get("operator_paused")
+            return None if waiting else "nothing waits for cycle start"
+        if sequence == "s1_wait_cycle_start":
+            return None  # no sender of ours: the daemon's pending M3 waits for it
+        return "nothing waits for cycle start"
+    if name == "pause":
+        if not view.running:
+            return "no program runs"
+        return "paused already" if progress.get("operator_paused") else None
+    if name == "stop":
+        return None if view.running or sequence not in IDLE_STATES else "nothing runs"
+    if name == "rearm":
+        return None if sequence == "faulted" else "nothing to re-arm (no fault)"
+    if name == "thc_on":
+        return "the THC is on" if (view.state or {}).get("thc_enabled") else None
+    if name == "thc_off":
+        return None if (view.state or {}).get("thc_enabled") else "the THC is off"
+    return None
+
+
+def enabled(view: LiveView) -> dict[str, str | None]:
+    """Every control: None when the state allows it, else the reason it is disabled."""
+    out: dict[str, str | None] = {}
+    for name, control in CONTROLS.items():
+        out[name] = _offline_reason(view, control) or _state_reason(name, view)
+    return out
+
+
+def route(name: str, args: Mapping[str, Any], view: LiveView) -> tuple[str, str, dict[str, Any]]:
+    """Where a press goes: (role, request name, arguments). ControlError for an unknown
+    control, a wrong argument, or a sender control with no sender to answer it."""
+    control = CONTROLS.get(name)
+    if control is None:
+        raise ControlError(f"{name}: no such control")
+    request_args = control.args(args)
+    role, request = control.role, control.request
+    if role == "sender" and not view.running:
+        # Without a program running there is no motion to hold: the daemon's own requests.
+        if name == "cycle_start":
+            return "daemon", "cycle_start", {}
+        if name == "stop":
+            return "daemon", "abort", {}
+        raise ControlError(f"{name}: no program runs (no sender is online)")
+    return role, request, request_args

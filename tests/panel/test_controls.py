@@ -1,0 +1,75 @@
+"""Which controls the state allows, and where a press goes."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from dthc_tools.panel.controls import CONTROLS, ControlError, LiveView, enabled, route
+
+
+def online(state: str = "idle", **more: Any) -> LiveView:
+    return LiveView(broker=True, daemon=True, board="online", state={"state": state, **more})
+
+
+def running(**progress: Any) -> LiveView:
+    view = online("cutting", thc_enabled=True)
+    view.sender = True
+    view.progress = {"running": True, "waiting_cycle_start": False, "operator_paused": False,
+                     **progress}  # fmt: skip
+    return view
+
+
+def allowed(view: LiveView) -> set[str]:
+    return {name for name, reason in enabled(view).items() if reason is None}
+
+
+def test_offline_disables_every_control_with_the_reason() -> None:
+    for view, reason in [
+        (LiveView(), "the broker is unreachable"),
+        (LiveView(broker=True), "the daemon is offline"),
+        (LiveView(broker=True, daemon=True, board="offline"), "the board is offline"),
+    ]:
+        reasons = enabled(view)
+        board_free = {"material_set", "material_delete"}
+        for name in CONTROLS:
+            if name in board_free and reason == "the board is offline":
+                continue  # the library is the daemon's: it is edited without the board
+            assert reasons[name] == reason, name
+
+
+def test_what_an_idle_table_allows() -> None:
+    assert allowed(online()) == {
+        "torch_up", "torch_down", "height_up", "height_down", "thc_on", "material_set",
+        "material_delete",
+    }  # fmt: skip
+    assert enabled(online())["cycle_start"] == "nothing waits for cycle start"
+    assert enabled(online())["rearm"] == "nothing to re-arm (no fault)"
+    assert "rearm" in allowed(online("faulted"))
+
+
+def test_a_running_program_allows_pause_and_stop_then_cycle_start_once_paused() -> None:
+    view = running()
+    assert {"pause", "stop", "thc_off"} <= allowed(view)
+    assert "cycle_start" not in allowed(view)
+    paused = running(operator_paused=True)
+    assert "cycle_start" in allowed(paused)
+    assert enabled(paused)["pause"] == "paused already"
+    assert "cycle_start" in allowed(running(waiting_cycle_start=True))
+
+
+def test_presses_go_to_the_sender_while_it_runs_and_to_the_daemon_without_it() -> None:
+    assert route("pause", {}, running()) == ("sender", "pause", {})
+    assert route("cycle_start", {}, running()) == ("sender", "cycle_start", {})
+    assert route("stop", {}, online("cutting")) == ("daemon", "abort", {})
+    assert route("cycle_start", {}, online("s1_wait_cycle_start")) == ("daemon", "cycle_start", {})
+    with pytest.raises(ControlError, match="pause: no program runs"):
+        route("pause", {}, online())
+    assert route("torch_up", {"volts": 50}, running()) == ("daemon", "torch_up", {"volts": 1.0})
+    assert route("height_down", {}, running()) == ("daemon", "height_override", {"mm": -0.1})
+    assert route("thc_off", {}, running()) == ("daemon", "thc", {"on": False})
+    with pytest.raises(ControlError, match="launch: no such control"):
+        route("launch", {}, running())
+    with pytest.raises(ControlError, match="material number: required"):
+        route("material_set", {"name": "x"}, online())
