@@ -259,6 +259,8 @@ async def _steer(
     await browser.until("!document.querySelector('#cut-figure').hidden", 5)
     caption = await browser.js("return document.querySelector('#cut-caption').textContent;")
     assert caption.startswith("Cut 1: line 6")
+    await browser.js("document.querySelector('#history').scrollIntoView();")
+    await browser.call(browser.driver.save_screenshot, str(workdir / "panel-history.png"))
     href = await browser.js("return document.querySelector('#cut-list a').getAttribute('href');")
     assert href == "/api/cuts/1.csv"
 

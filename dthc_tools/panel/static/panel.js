@@ -43,7 +43,8 @@ function onTelemetry(point) {
     requestAnimationFrame(() => {
       drawPending = false;
       const last = points[points.length - 1].t;
-      drawChart($("#chart"), points.filter((p) => p.t >= last - WINDOW_S), last - WINDOW_S, last);
+      drawChart($("#chart"), points.filter((p) => p.t >= last - WINDOW_S), last - WINDOW_S, last,
+        "height_mm");
       window.panelStats.draws += 1;
     });
   }
@@ -253,14 +254,14 @@ async function plotCut(number) {
   $("#cut-figure").hidden = false;
   const start = trace.length ? trace[0].t : 0;
   const end = trace.length ? trace[trace.length - 1].t : 1;
-  drawChart($("#cut-chart"), trace, start, Math.max(end, start + 0.5));
+  drawChart($("#cut-chart"), trace, start, Math.max(end, start + 0.5), "z_mm");
   $("#cut-caption").textContent = `Cut ${number}: line ${cut.start_line ?? "-"}, arc on ${fmt(cut.arc_on_s, 2, " s")}, ` +
     `${trace.length} points${cut.error ? `, ended by: ${cut.error}` : ""}`;
 }
 
-// --- the chart: voltage and target on the left axis, height on the right --------------------
+// --- the chart: voltage and target on the left axis, a Z series (mm) on the right ----------
 
-function drawChart(canvas, series, t0, t1) {
+function drawChart(canvas, series, t0, t1, zKey) {
   const ratio = window.devicePixelRatio || 1;
   const width = canvas.clientWidth || canvas.width;
   const height = Math.round(width * (canvas.height / canvas.width)) || canvas.height;
@@ -274,7 +275,7 @@ function drawChart(canvas, series, t0, t1) {
   const pad = { left: 46, right: 46, top: 10, bottom: 22 };
   const w = width - pad.left - pad.right;
   const h = height - pad.top - pad.bottom;
-  const heights = series.map((p) => p.height_mm).filter((x) => typeof x === "number");
+  const heights = series.map((p) => p[zKey]).filter((x) => typeof x === "number");
   // With a target, the scale is the THC's: ±30 V around it, so a 1 V correction shows and
   // the open-circuit spike of an arc start is clipped; without one, whatever was measured.
   const targets = series.map((p) => p.target_v).filter((x) => typeof x === "number");
@@ -323,7 +324,7 @@ function drawChart(canvas, series, t0, t1) {
   };
   line("voltage_v", yV, "--volts");
   line("target_v", yV, "--target");
-  line("height_mm", yH, "--height");
+  line(zKey, yH, "--height");
   g.restore();
 }
 
