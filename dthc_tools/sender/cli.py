@@ -55,6 +55,11 @@ def build_parser(prog: str = "dthc-bridge send") -> argparse.ArgumentParser:
         "--yes-cycle-start", action="store_true",
         help="press cycle start at each G200 S1 stop after pierce (no operator)",
     )  # fmt: skip
+    parser.add_argument(
+        "--wait-operator", action="store_true",
+        help="after an error, wait for the operator (a panel: paused motion, resume, "
+        "restart, quit) instead of ending; a terminal waits anyway",
+    )  # fmt: skip
     add_dialect_options(parser)
     parser.add_argument("--json", action="store_true")
     return parser
@@ -91,10 +96,13 @@ async def _send(args: argparse.Namespace) -> int:
     )
     backend = await _backend(args)
     sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
-    remote = OperatorRemote(sender, daemon, program=str(args.program))  # a panel's controls
+    console = OperatorConsole(
+        sender, interactive=_interactive() and not args.json, wait_operator=args.wait_operator
+    )
+    # A panel's controls: the console's actions as MQTT requests.
+    remote = OperatorRemote(sender, daemon, program=str(args.program), console=console)
     try:
         async with daemon.connected():
-            console = OperatorConsole(sender, interactive=_interactive() and not args.json)
             progress = asyncio.create_task(remote.publish_progress())
             try:
                 report = await console.run_job(

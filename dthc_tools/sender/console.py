@@ -8,12 +8,17 @@ Keys (single keys, no Enter, when the terminal is interactive):
     +  torch up 1 V       -  torch down 1 V
     >  feed +10 %         <  feed -10 %         =  feed 100 %   (grbl's feed override)
     u  cut height +0.1 mm d  cut height -0.1 mm (PlasmaC's height override)
-    r  after an error: re-arm, then restart from the last resume point (G100 P0) or the
-       start of the cut the error happened in
-    q  after an error: quit
+After an error (arc lost, a fault, s), the program is paused where the torch stopped:
+
+    [  back along the path 5 mm   ]  forward 5 mm        (paused motion, torch off)
+    4 6 8 2  cut recovery: the torch 1 mm left, right, up, down off the path;  0 back on it
+    g  resume here: re-arm, the start sequence where the torch stands, the program goes on
+    r  re-arm, then restart from the last resume point (G100 P0) or the start of the cut
+    q  quit
 
 Not interactive (a pipe, a service, CI): no keys and no progress line; ``--yes-cycle-start``
-presses cycle start at each S1 stop, and a restart is ``--start-line``.
+presses cycle start at each S1 stop, and a restart is ``--start-line``. ``--wait-operator``
+waits after an error for the same actions from a panel (:mod:`.remote`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from dthc_bridge.controller.dialect import Dialect
 
 from .backend import BackendError
 from .daemon_client import DaemonError
+from .recovery import PausedProgram, ResumeAt
 from .sender import Sender, SendReport
 
 __all__ = ["KEYS", "OperatorConsole"]
@@ -41,8 +47,13 @@ log = structlog.get_logger("dthc_tools.sender.console")
 
 KEYS = (
     "c cycle start · p pause · s stop · +/- torch 1 V · u/d height 0.1 mm · >/</= feed · "
+    "after an error: [/] path -/+5 mm · 4/6/8/2 offset 1 mm · 0 on path · g resume here · "
     "r re-arm+restart · q quit"
 )
+PATH_STEP_MM = 5.0
+OFFSET_STEP_MM = 1.0
+OFFSET_KEYS = {"4": (-1.0, 0.0), "6": (1.0, 0.0), "8": (0.0, 1.0), "2": (0.0, -1.0)}
+PAUSED_ACTIONS = frozenset({"path_move", "recovery_offset", "resume", "restart", "quit"})
 FEED_KEYS = {">": "+10", "<": "-10", "=": "reset"}
 BAR = 20
 TORCH_STEP_V = 1.0
@@ -50,13 +61,27 @@ HEIGHT_STEP_MM = 0.1
 
 
 class OperatorConsole:
-    def __init__(self, sender: Sender, *, out: TextIO = sys.stderr, interactive: bool) -> None:
+    def __init__(
+        self,
+        sender: Sender,
+        *,
+        out: TextIO = sys.stderr,
+        interactive: bool,
+        wait_operator: bool = False,
+    ) -> None:
         self.sender = sender
         self.out = out
         self.interactive = interactive
+        # After an error: wait for the operator (keys, or a panel's requests) to move, resume,
+        # restart or quit, rather than end with the error.
+        self.waits = interactive or wait_operator
         self.telemetry: dict[str, Any] = {}
         self.messages: list[str] = []
-        self._keys: asyncio.Queue[str] = asyncio.Queue()  # r / q, for the job loop
+        # What the operator asks of a paused program, for the job loop, with the answer.
+        self._actions: asyncio.Queue[tuple[str, dict[str, Any], asyncio.Future[Any]]] = (
+            asyncio.Queue()
+        )
+        self.paused: PausedProgram | None = None
         self._pressed: asyncio.Queue[str] = asyncio.Queue()  # from the terminal
         sender.daemon.on_telemetry(self.telemetry.update)
 
@@ -93,10 +118,38 @@ class OperatorConsole:
                 await sender.height(HEIGHT_STEP_MM if key == "u" else -HEIGHT_STEP_MM)
             elif key in FEED_KEYS:
                 sender.feed_override(FEED_KEYS[key])
-            else:
-                self._keys.put_nowait(key)  # r / q: the job loop's, after an error
+            elif key in "[]" and key:
+                step = PATH_STEP_MM if key == "]" else -PATH_STEP_MM
+                where = await self.act("path_move", mm=step)
+                self._say(f"torch at line {where['line']}, X{where['x_mm']} Y{where['y_mm']}")
+            elif key in OFFSET_KEYS or key == "0":
+                x, y = self.paused.offset_mm if self.paused is not None else (0.0, 0.0)
+                dx, dy = OFFSET_KEYS.get(key, (-x, -y))
+                await self.act("recovery_offset", x_mm=round(x + dx, 3), y_mm=round(y + dy, 3))
+            elif key == "g":
+                await self.act("resume")
+            elif key in "rq" and key:
+                await self.act("restart" if key == "r" else "quit")
         except (DaemonError, BackendError) as exc:
             self._say(f"{key}: {exc}")
+
+    async def act(self, name: str, **args: Any) -> Any:
+        """An action on a paused program (keys, a panel): done by the job loop once the
+        program has stopped; its answer, or BackendError with the reason. During an
+        operator's pause (p) a move first stops the cut where the torch is."""
+        if name not in PAUSED_ACTIONS:
+            raise BackendError(f"{name}: unknown action")
+        progress = self.sender.progress
+        if progress.running:
+            if name in ("path_move", "recovery_offset") and progress.operator_paused:
+                await self.sender.stop()  # torch off where it stands; paused motion follows
+            elif name != "quit":
+                raise BackendError(f"{name}: the program is running (pause it, or stop it)")
+        elif self.paused is None and name != "quit":
+            raise BackendError(f"{name}: no program is paused")
+        answer: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
+        self._actions.put_nowait((name, args, answer))
+        return await answer
 
     def _say(self, text: str) -> None:
         self.messages.append(text)
@@ -113,31 +166,83 @@ class OperatorConsole:
         dialect: Dialect | None = None,
         codes: Mapping[str, str] | None = None,
     ) -> SendReport:
-        """Run the program; after an error an interactive operator may re-arm and restart."""
+        """Run the program; after an error the operator may move along the path, resume
+        where the torch stands, re-arm and restart, or quit (when someone is there)."""
+        resume: ResumeAt | None = None
         with self._keyboard(), self._progress():
             while True:
                 report = await self.sender.run(
-                    lines, start_line=start_line, dialect=dialect, codes=codes
+                    lines, start_line=start_line, dialect=dialect, codes=codes, resume=resume
                 )
-                restart = report.restart_line
-                if report.ok or not self.interactive or restart is None:
+                if report.ok or not self.waits:
                     return report
                 self._say(f"stopped at line {report.error_line}: {report.error}")
-                self._say(f"r: re-arm and restart from line {restart} · q: quit")
-                if await self._restart_key() != "r":
+                choice = await self._paused(report)
+                if choice is None:
                     return report
-                try:
-                    await self.sender.rearm()
-                except (DaemonError, BackendError) as exc:
-                    self._say(f"re-arm failed: {exc}")
-                    return report
-                start_line = restart
+                start_line, resume = choice
 
-    async def _restart_key(self) -> str:
-        while True:
-            key = await self._keys.get()
-            if key in "rq" and key:
-                return key
+    async def _paused(self, report: SendReport) -> tuple[int, ResumeAt | None] | None:
+        """The operator's actions until a resume, a restart or quit: (start line, resume
+        point) to run from, or None to end."""
+        sender = self.sender
+        paused = None
+        if sender.path is not None and sender.path.segments:
+            paused = PausedProgram(sender, sender.path, up_to_step=sender.last_step)
+            try:
+                await paused.locate()
+            except BackendError as exc:
+                self._say(f"paused motion unavailable: {exc}")
+                paused = None
+        self.paused = paused
+        sender.progress.paused_at = paused.where() if paused is not None else None
+        restart = report.restart_line
+        self._say(("g: resume here · [/]: along the path · " if paused else "")
+                  + (f"r: re-arm and restart from line {restart} · " if restart else "")
+                  + "q: quit")  # fmt: skip
+        try:
+            while True:
+                name, args, answer = await self._actions.get()
+                try:
+                    result = await self._paused_action(name, args, paused, restart)
+                except (DaemonError, BackendError) as exc:
+                    answer.set_exception(BackendError(str(exc)))
+                    continue
+                if paused is not None:
+                    sender.progress.paused_at = paused.where()
+                if isinstance(result, tuple) or result is None:
+                    answer.set_result({})
+                    return result
+                answer.set_result(result)
+        finally:
+            self.paused = None
+            sender.progress.paused_at = None
+
+    async def _paused_action(
+        self,
+        name: str,
+        args: dict[str, Any],
+        paused: PausedProgram | None,
+        restart: int | None,
+    ) -> dict[str, Any] | tuple[int, ResumeAt | None] | None:
+        if name == "quit":
+            return None
+        if name == "restart":
+            if restart is None:
+                raise BackendError("restart: no line to restart from")
+            await self.sender.rearm()
+            return restart, None
+        if paused is None:
+            raise BackendError(f"{name}: the torch is not on the program's path")
+        if name == "resume":
+            at = paused.resume_at()
+            await self.sender.rearm()
+            return 1, at
+        if name == "path_move":
+            return await paused.move_along(_number(args, "mm"), _number(args, "feed_mm_min", None))
+        return await paused.set_offset(
+            _number(args, "x_mm"), _number(args, "y_mm"), _number(args, "feed_mm_min", None)
+        )
 
     @contextlib.contextmanager
     def _keyboard(self) -> Iterator[None]:
@@ -194,3 +299,18 @@ class OperatorConsole:
         finally:
             task.cancel()
             self.out.write(f"\r\x1b[K{self.status_line()}\n")
+
+
+_REQUIRED = object()
+
+
+def _number(args: dict[str, Any], key: str, default: Any = _REQUIRED) -> Any:
+    """An argument that must be a number (or absent, when it has a default)."""
+    if key not in args:
+        if default is _REQUIRED:
+            raise BackendError(f"{key}: required argument is missing")
+        return default
+    value = args[key]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BackendError(f"{key}: {value!r} is not a number")
+    return float(value)

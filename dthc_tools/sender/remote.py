@@ -9,7 +9,10 @@ cut. The sender answers on its own topics, next to the daemon's:
     <base>/<board>/sender/progress          retained: line n/N, cut n/m, waiting, paused, error
     <base>/<board>/sender/availability      retained: {"state": "online"}; its will says offline
 
-Names: ``cycle_start``, ``pause``, ``stop``, ``feed_override`` {step: "+10"|"-10"|"reset"}.
+Names: ``cycle_start``, ``pause``, ``stop``, ``feed_override`` {step: "+10"|"-10"|"reset"};
+after an error (the program paused where the torch stopped, see :mod:`.recovery`):
+``path_move`` {mm, feed_mm_min?}, ``recovery_offset`` {x_mm, y_mm, feed_mm_min?},
+``resume`` (here), ``restart`` (from the cut's start), ``quit``.
 Every request gets exactly one response, an unknown name or argument an error naming it.
 """
 
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import json
 from collections.abc import Awaitable, Callable
 from dataclasses import asdict
@@ -26,6 +30,7 @@ from typing import Any
 import structlog
 
 from .backend import BackendError
+from .console import PAUSED_ACTIONS, OperatorConsole
 from .daemon_client import INVALID, DaemonClient, DaemonError
 from .sender import Sender
 
@@ -42,8 +47,16 @@ FEED_STEPS = ("+10", "-10", "reset")
 class OperatorRemote:
     """Serves ``sender/request/+`` and publishes ``sender/progress`` for one sender."""
 
-    def __init__(self, sender: Sender, client: DaemonClient, *, program: str = "") -> None:
+    def __init__(
+        self,
+        sender: Sender,
+        client: DaemonClient,
+        *,
+        program: str = "",
+        console: OperatorConsole | None = None,
+    ) -> None:
         self.sender = sender
+        self.console = console
         self.client = client
         self.program = PurePosixPath(program).name
         self._tasks: set[asyncio.Task[None]] = set()
@@ -53,6 +66,8 @@ class OperatorRemote:
             "stop": lambda _args: sender.stop(),
             "feed_override": self._feed_override,
         }
+        for name in PAUSED_ACTIONS:
+            self._actions[name] = functools.partial(self._paused_action, name)
         client.on_topic("sender/request/+", self._on_request)
 
     def _on_request(self, topic: str, document: dict[str, Any]) -> None:
@@ -77,6 +92,11 @@ class OperatorRemote:
         log.info("operator_request", name=name, status=response["status"],
                  error=response.get("error"))  # fmt: skip
         await self.client.publish(f"sender/response/{name}", response)
+
+    async def _paused_action(self, name: str, args: dict[str, Any]) -> None:
+        if self.console is None:
+            raise BackendError(f"{name}: this sender has no operator console")
+        await self.console.act(name, **args)
 
     async def _feed_override(self, args: dict[str, Any]) -> None:
         step = args.get("step")

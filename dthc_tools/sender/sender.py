@@ -22,11 +22,8 @@ from typing import Any, TypeVar
 import structlog
 
 from dthc_bridge.controller.commands import (
-    Command,
     CommandError,
-    ProbeAndStart,
     ResumePoint,
-    TorchStart,
     VelocityReduction,
 )
 from dthc_bridge.controller.dialect import Dialect
@@ -44,6 +41,8 @@ from dthc_bridge.program.plan import (
 
 from .backend import BackendError, MotionBackend
 from .daemon_client import DaemonClient, DaemonError
+from .path import ProgramPath, build_path, starts_cut
+from .recovery import ResumeAt
 
 __all__ = ["SendReport", "Sender"]
 
@@ -109,6 +108,8 @@ class Progress:
     waiting_cycle_start: bool = False
     operator_paused: bool = False
     running: bool = False
+    # After an error, while the operator may move the torch: where it is on the path.
+    paused_at: dict[str, Any] | None = None
 
 
 class Sender:
@@ -130,6 +131,8 @@ class Sender:
         backend.add_motion_listener(self._on_motion)
         self._reports: set[asyncio.Task[None]] = set()
         self.motion_reports = 0
+        self.path: ProgramPath | None = None  # the running program's XY path
+        self.last_step = -1  # the last plan step sent: the torch is on the path up to it
 
     def _on_motion(self, speed_mm_s: float, state: str) -> None:
         """The motion controller's measured XY speed, to the daemon's anti-dive (boards
@@ -233,8 +236,10 @@ class Sender:
         start_line: int = 1,
         dialect: Dialect | None = None,
         codes: Mapping[str, str] | None = None,
+        resume: ResumeAt | None = None,
     ) -> SendReport:
-        """Send the program from ``start_line`` (1-based); stop at the first error.
+        """Send the program from ``start_line`` (1-based), or from a point of its path
+        (``resume``: after paused motion, see :mod:`.recovery`); stop at the first error.
 
         ``dialect``: None detects it (:func:`~dthc_bridge.program.plan.detect_dialect`;
         the daemon's ``controller.dialect`` when nothing dialect-specific is found);
@@ -247,7 +252,7 @@ class Sender:
         self.progress = Progress(total_lines=len(lines), running=True)
         self._go.set()
         try:
-            return await self._run(lines, start_line, dialect, codes, report)
+            return await self._run(lines, start_line, dialect, codes, report, resume=resume)
         except asyncio.CancelledError:
             # Ctrl-C, or the caller gave up: nothing may go on without the sender.
             await asyncio.shield(self._stop_machine())
@@ -264,6 +269,8 @@ class Sender:
         dialect: Dialect | None,
         codes: Mapping[str, str] | None,
         report: SendReport,
+        *,
+        resume: ResumeAt | None = None,
     ) -> SendReport:
         try:
             started = await self.daemon.request("program_start")
@@ -276,21 +283,36 @@ class Sender:
         report.dialect = str(dialect)
         shop_codes = started.get("codes")
         table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
-        # Counted on a plan of its own: the running plan's NGC reads the daemon's answers
-        # (cut-feed-rate after an M190), so its steps cannot be listed ahead.
-        self.progress.total_cuts = count_cuts(ProgramPlan(lines, dialect, table))
+        # Counted, and the path drawn, on a plan of its own: the running plan's NGC reads
+        # the daemon's answers (cut-feed-rate after an M190), so its steps cannot be listed
+        # ahead.
+        ahead = ProgramPlan(lines, dialect, table)
+        listed = list(ahead.steps())
+        self.progress.total_cuts = sum(_cuts_in(step, ahead) for step in listed)
+        self.path = build_path(ahead, listed)
         plan = ProgramPlan(lines, dialect, table)
         self._note_cut_feed(started, plan)
         number = start_line
         restart = RestartPosition()
-        for step in plan.steps():
+        resumed = _Resumption(self.path, resume) if resume is not None else None
+        for index, step in enumerate(plan.steps()):
             number = step.source_line
             self.progress.line = number
-            if number < start_line:
+            if resumed is not None and resumed.skips(index, step):
+                restart.skip(step)
+                if not resumed.replays(index, step):
+                    self.progress.cut += _cuts_in(step, plan)
+                continue
+            if resumed is None and number < start_line:
                 restart.skip(step)
                 self.progress.cut += _cuts_in(step, plan)
                 continue
+            self.last_step = index
             try:
+                if resumed is not None:  # the step whose segment the resume point splits
+                    await self._resume_here(resumed, restart, plan, report, number)
+                    resumed = None
+                    continue
                 for line in restart.lines():  # once: back to where the skipped lines end
                     await self._unless_paused(self.backend.queue(line, source_line=number))
                 await self._step(step, plan, report)
@@ -315,6 +337,36 @@ class Sender:
             report.error, report.error_line = f"paused: {self._pause_reason}", number
         report.warnings = plan.warnings
         return report
+
+    async def _resume_here(
+        self,
+        resumed: _Resumption,
+        restart: RestartPosition,
+        plan: ProgramPlan,
+        report: SendReport,
+        number: int,
+    ) -> None:
+        """To the resume point (plus a cut recovery offset), the cut's start sequence there
+        with the cut's plasma lines before the point, back onto the path, the rest of the
+        split segment."""
+        path, point = resumed.path, resumed.at.point
+        x, y = path.xy(point)
+        dx, dy = resumed.at.offset_mm
+        restart.x_mm, restart.y_mm, restart.pending = x + dx, y + dy, True
+        restart.unknown = ""  # the point is known: the path was followed to it
+        for line in restart.lines():
+            await self._unless_paused(self.backend.queue(line, source_line=number))
+        for step in resumed.replay:  # the cut's M3 first: touch-off, pierce, cut height here
+            await self._step(step, plan, report)
+        segment = path.segments[point.segment]
+        if (dx, dy) != (0.0, 0.0) and segment.feed is not None:
+            back = f"G1 X{x / path.scale:.4f} Y{y / path.scale:.4f} F{segment.feed:g}"
+            await self._unless_paused(self.backend.queue(back, source_line=number))
+        rest = path.rest_of(point)
+        if rest is not None:
+            await self._unless_paused(self.backend.queue(rest, source_line=number))
+        report.lines_sent += 1
+        log.info("resumed_at", line=number, x=round(x, 3), y=round(y, 3), offset=[dx, dy])
 
     async def _stop_machine(self) -> None:
         """The program stops: motion held and, at the same time, the daemon told to end a
@@ -423,6 +475,30 @@ class Sender:
         return (float("nan"), float("nan")) if xy is None else xy
 
 
+class _Resumption:
+    """A run that starts at a point of the path: which steps it skips, and which of them
+    (the cut's own plasma lines, from its M3 on) are sent again at the point."""
+
+    def __init__(self, path: ProgramPath, at: ResumeAt) -> None:
+        self.path = path
+        self.at = at
+        segment = path.segments[at.point.segment]
+        self.step_index = segment.step_index
+        self.replay_from = (
+            path.cut_steps[segment.cut] if segment.cut is not None else segment.step_index
+        )
+        self.replay: list[DaemonStep] = []
+
+    def skips(self, index: int, _step: Step) -> bool:
+        return index < self.step_index
+
+    def replays(self, index: int, step: Step) -> bool:
+        if index >= self.replay_from and isinstance(step, DaemonStep):
+            self.replay.append(step)
+            return True
+        return False
+
+
 class RestartPosition:
     """The motion state the skipped lines of a restart leave, so the restart first goes
     where they end (``G0``) and then carries on modally: units, work offset (G54-G59),
@@ -514,18 +590,6 @@ def _cuts_in(step: Step, plan: ProgramPlan) -> int:
     except CommandError:
         return 0
     return sum(1 for command in parsed.commands if starts_cut(command))
-
-
-def count_cuts(plan: ProgramPlan) -> int:
-    """The cuts a program will start (for the progress display)."""
-    return sum(_cuts_in(step, plan) for step in plan.steps())
-
-
-def starts_cut(command: Command) -> bool:
-    """M3, or RosettaCNC G100 P6 in a mode that starts the torch (I0/I1; I2/I3 set values)."""
-    return isinstance(command, TorchStart) or (
-        isinstance(command, ProbeAndStart) and command.mode in (0, 1)
-    )
 
 
 def _daemon_dialect(started: Mapping[str, Any]) -> tuple[Dialect, str] | None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dthc_bridge.controller.gcode import parse_line
-from dthc_tools.sender.sender import starts_cut
+from dthc_tools.sender.path import starts_cut
 
 G100_P6 = "G100 P6 A1000 B-60 C300 D3.8 E0.5 F3 H1.5"
 
