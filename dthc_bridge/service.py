@@ -157,6 +157,11 @@ class ControllerService:
             return CommandResult(
                 True, {**started, "dialect": str(self.dialect), "codes": dict(self.codes)}
             )
+        if name == "program_end":
+            if self.sequence.busy:
+                return CommandResult(False, error=f"program_end: a cut is running "
+                                     f"({self.sequence.state})")  # fmt: skip
+            return CommandResult(True, self.controller.end_program())
         try:
             command = parse_request(name, args)
         except CommandError as exc:

@@ -124,6 +124,11 @@ class PlasmaController:
             "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
         }
 
+    def end_program(self) -> dict[str, Any]:
+        """The program ran to its end: PlasmaC resets the height override with it."""
+        self.sequence.override_height(0.0)
+        return {"height_override_mm": 0.0}
+
     def _override_height(self, command: HeightOverride) -> dict[str, Any]:
         sequence = self.sequence
         height = 0.0 if command.reset else round(sequence.height_override_mm + command.step_mm, 1)

@@ -15,7 +15,11 @@ __all__ = ["CONTROLS", "Control", "ControlError", "LiveView", "enabled", "route"
 
 TORCH_STEP_V = 1.0
 HEIGHT_STEP_MM = 0.1
+PATH_STEP_MM = 5.0
 IDLE_STATES = frozenset({"idle", "faulted"})
+PAUSED_CONTROLS = frozenset(
+    {"path_back", "path_forward", "recovery_offset", "resume_here", "restart_cut"}
+)
 
 
 class ControlError(Exception):
@@ -43,6 +47,12 @@ class LiveView:
         """A sender runs a program."""
         return self.sender and bool((self.progress or {}).get("running"))
 
+    @property
+    def paused_at(self) -> Mapping[str, Any] | None:
+        """A sender's program stopped after an error, the torch found on its path."""
+        at = (self.progress or {}).get("paused_at")
+        return at if self.sender and isinstance(at, Mapping) else None
+
 
 @dataclass(frozen=True)
 class Control:
@@ -67,6 +77,26 @@ def _material(args: Mapping[str, Any]) -> dict[str, Any]:
     return dict(args)
 
 
+def _path(sign: float) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    """Paused motion: ``mm`` (a distance, the page's step) back or forward, at its feed."""
+
+    def args(given: Mapping[str, Any]) -> dict[str, Any]:
+        mm = given.get("mm", PATH_STEP_MM)
+        if isinstance(mm, bool) or not isinstance(mm, int | float) or not 0 < mm <= 1000:
+            raise ControlError(f"path mm: {mm!r} must be a distance of 0 to 1000 mm")
+        out: dict[str, Any] = {"mm": sign * float(mm)}
+        if "feed_mm_min" in given:
+            out["feed_mm_min"] = given["feed_mm_min"]  # the sender checks it
+        return out
+
+    return args
+
+
+def _offset(given: Mapping[str, Any]) -> dict[str, Any]:
+    """The new offset off the path; the sender checks the numbers and the bound."""
+    return {key: given[key] for key in ("x_mm", "y_mm", "feed_mm_min") if key in given}
+
+
 def _material_number(args: Mapping[str, Any]) -> dict[str, Any]:
     if "number" not in args:
         raise ControlError("material number: required")
@@ -84,6 +114,11 @@ CONTROLS: dict[str, Control] = {
     "pause": Control("sender", "pause", _none),
     "stop": Control("sender", "stop", _none),
     "rearm": Control("daemon", "rearm", _none),
+    "path_back": Control("sender", "path_move", _path(-1.0)),
+    "path_forward": Control("sender", "path_move", _path(+1.0)),
+    "recovery_offset": Control("sender", "recovery_offset", _offset),
+    "resume_here": Control("sender", "resume", _none),
+    "restart_cut": Control("sender", "restart", _none),
     "material_set": Control("daemon", "material_set", _material, needs_board=False),
     "material_delete": Control("daemon", "material_delete", _material_number, needs_board=False),
 }
@@ -118,6 +153,15 @@ def _state_reason(name: str, view: LiveView) -> str | None:
         return None if view.running or sequence not in IDLE_STATES else "nothing runs"
     if name == "rearm":
         return None if sequence == "faulted" else "nothing to re-arm (no fault)"
+    if name in PAUSED_CONTROLS:
+        if view.paused_at is not None:
+            if name == "restart_cut" and not progress.get("restart_line"):
+                return "no line to restart from"
+            return None
+        if name in ("path_back", "path_forward", "recovery_offset") and view.running:
+            # During an operator's pause a move first ends the cut where the torch is.
+            return None if progress.get("operator_paused") else "pause the program first"
+        return "no program is paused"
     if name == "thc_on":
         return "the THC is on" if (view.state or {}).get("thc_enabled") else None
     if name == "thc_off":
@@ -141,6 +185,10 @@ def route(name: str, args: Mapping[str, Any], view: LiveView) -> tuple[str, str,
         raise ControlError(f"{name}: no such control")
     request_args = control.args(args)
     role, request = control.role, control.request
+    if name in PAUSED_CONTROLS:
+        if not view.sender:
+            raise ControlError(f"{name}: no sender is online")
+        return role, request, request_args
     if role == "sender" and not view.running:
         # Without a program running there is no motion to hold: the daemon's own requests.
         if name == "cycle_start":

@@ -335,6 +335,11 @@ class Sender:
             await self._stop_machine()
         if self._pause.is_set() and not report.error:
             report.error, report.error_line = f"paused: {self._pause_reason}", number
+        if not report.error:
+            # At its end: PlasmaC resets the height override; an old daemon without the
+            # request still answers, with an error, and ran the program just the same.
+            with contextlib.suppress(DaemonError):
+                await self.daemon.request("program_end")
         report.warnings = plan.warnings
         return report
 

@@ -54,6 +54,17 @@ async def test_the_next_cut_takes_the_override_and_the_next_program_drops_it(
     assert sequence._override_v() == 0.0
 
 
+async def test_the_end_of_the_program_resets_the_override(service: ControllerService) -> None:
+    sequence = service.sequence
+    sequence.thc.target_v = 118.0
+    await service.execute_request("height_override", {"mm": 0.3})
+    result = await service.execute_request("program_end", {})
+    assert result.ok, result.error
+    assert result.data == {"height_override_mm": 0.0}
+    assert sequence.height_override_mm == 0.0
+    assert sequence.thc.target_v == pytest.approx(118.0)
+
+
 @pytest.mark.parametrize(
     ("args", "error"),
     [

@@ -1,5 +1,6 @@
-"""PlasmaC's paused motion and cut recovery end to end: the daemon, the mock board and
-mosquitto as processes, the sender with its operator console in this process.
+"""PlasmaC's paused motion and cut recovery end to end: the daemon, the mock board,
+mosquitto (and the emulated grbl) as processes, the sender with its operator console in
+this process.
 
 The mock's truth (where the arc really burned) is the judge: after an arc lost mid-part,
 reverse 20 mm and resume, the part is finished and the second burn overlaps the first;
@@ -23,6 +24,7 @@ from dthc_tools.demo.summary import summarize
 from dthc_tools.sender import Sender
 from dthc_tools.sender.backend import BackendError
 from dthc_tools.sender.console import OperatorConsole
+from dthc_tools.sender.grbl_backend import GrblBackend
 from dthc_tools.sender.sender import SendReport
 from mock_device.plant.arc import ArcState
 
@@ -49,6 +51,8 @@ async def run_with_operator(
     once the program is paused."""
     daemon = stack.daemon_client()
     backend = stack.motion_backend()
+    if isinstance(backend, GrblBackend):
+        await backend.connect()
     async with daemon.connected():
         sender = Sender(daemon, backend, auto_cycle_start=True)
         console = OperatorConsole(sender, out=io.StringIO(), interactive=False,
@@ -89,8 +93,10 @@ def burns(truth: Path, y: float) -> list[tuple[float, float]]:
 async def test_arc_lost_mid_part_reverse_20_mm_and_resume_overlaps_the_lost_section(
     tmp_path: Path,
 ) -> None:
+    """Through the grbl backend: X and Y on the emulated grbl (its own process on a pty),
+    mirrored into the mock's plant."""
     options = StackOptions(tmp_path, scenario="arc_lost_midcut", broker="mosquitto",
-                           telemetry_hz=10.0)  # fmt: skip
+                           telemetry_hz=10.0, motion="grbl")  # fmt: skip
     seen: dict[str, Any] = {}
 
     async def operator(console: OperatorConsole) -> None:

@@ -73,3 +73,33 @@ def test_presses_go_to_the_sender_while_it_runs_and_to_the_daemon_without_it() -
         route("launch", {}, running())
     with pytest.raises(ControlError, match="material number: required"):
         route("material_set", {"name": "x"}, online())
+
+
+def paused(**where: Any) -> LiveView:
+    view = online("faulted")
+    view.sender = True
+    view.progress = {"running": False, "restart_line": 6,
+                     "paused_at": {"line": 7, "x_mm": 126.0, "y_mm": 100.0, **where}}  # fmt: skip
+    return view
+
+
+def test_paused_motion_is_offered_while_a_program_is_paused_and_goes_to_the_sender() -> None:
+    assert {"path_back", "path_forward", "recovery_offset", "resume_here",
+            "restart_cut", "rearm"} <= allowed(paused())  # fmt: skip
+    assert enabled(online())["path_back"] == "no program is paused"
+    assert enabled(running())["path_forward"] == "pause the program first"
+    assert "path_back" in allowed(running(operator_paused=True))
+    assert route("path_back", {"mm": 20, "feed_mm_min": 1200}, paused()) == (
+        "sender", "path_move", {"mm": -20.0, "feed_mm_min": 1200},
+    )  # fmt: skip
+    assert route("path_forward", {}, paused()) == ("sender", "path_move", {"mm": 5.0})
+    assert route("recovery_offset", {"x_mm": -3, "y_mm": 4}, paused()) == (
+        "sender", "recovery_offset", {"x_mm": -3, "y_mm": 4},
+    )  # fmt: skip
+    assert route("resume_here", {}, paused()) == ("sender", "resume", {})
+    with pytest.raises(ControlError, match="path mm: -5 must be a distance"):
+        route("path_back", {"mm": -5}, paused())
+    gone = paused()
+    gone.sender = False
+    with pytest.raises(ControlError, match="resume_here: no sender is online"):
+        route("resume_here", {}, gone)

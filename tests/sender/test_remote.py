@@ -114,3 +114,21 @@ async def test_progress_is_published_retained_on_change_and_at_the_end() -> None
     assert progress[0]["program"] == "s1.nc"  # the name, not the shop PC's path
     assert progress[1]["line"] == 4
     assert len(progress) == 3  # the first, the change, the last on the way out
+
+
+async def test_paused_motion_requests_go_to_the_console_and_answer_its_reason() -> None:
+    """A panel's paused motion: the console does it (once the program has stopped); its
+    refusal is the response's error."""
+    from dthc_tools.sender.console import OperatorConsole
+
+    broker = Broker()
+    sender = Sender(cast(DaemonClient, broker), FakeBackend())
+    console = OperatorConsole(sender, interactive=False, wait_operator=True)
+    OperatorRemote(sender, cast(DaemonClient, broker), console=console)
+    refused = await broker.press("path_move", {"mm": -20, "transaction": 1})
+    assert refused["error"] == "path_move: no program is paused"
+    sender.progress.running = True
+    refused = await broker.press("resume", {"transaction": 2})
+    assert refused["error"] == "resume: the program is running (pause it, or stop it)"
+    unknown = await broker.press("jump", {"transaction": 3})
+    assert unknown["error"] == "jump: unknown sender request"

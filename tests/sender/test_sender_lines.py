@@ -92,7 +92,7 @@ async def _send(
         program, dialect=dialect, codes=codes
     )
     assert report.ok, report.error
-    assert daemon.requests == ["program_start"]
+    assert daemon.requests == ["program_start", "program_end"]  # the end resets the override
     return daemon, backend
 
 

@@ -104,6 +104,33 @@ function render() {
   }
   renderParams(state);
   renderMaterials(v.materials);
+  const at = progress && progress.paused_at;
+  $("#paused-where").textContent = at
+    ? `Torch at line ${at.line} (cut ${at.cut ?? "-"}), X${at.x_mm} Y${at.y_mm}: ` +
+      `${at.behind_mm} mm of the cut behind, ${at.ahead_mm} mm of the program ahead, ` +
+      `offset ${at.offset_mm[0]}, ${at.offset_mm[1]} mm`
+    : "No program is paused.";
+}
+
+// The arguments a button's press carries: paused motion's step and feed, a recovery offset
+// (the new offset from the one in force).
+function argsFor(button) {
+  const name = button.dataset.control;
+  const feed = Number($("#path-feed").value);
+  if (name === "path_back" || name === "path_forward") {
+    return { mm: Number($("#path-step").value), feed_mm_min: feed };
+  }
+  if (name === "recovery_offset") {
+    const at = (view && view.progress && view.progress.paused_at) || { offset_mm: [0, 0] };
+    if (button.dataset.zero) return { x_mm: 0, y_mm: 0, feed_mm_min: feed };
+    const round = (x) => Math.round(x * 1000) / 1000;
+    return {
+      x_mm: round(at.offset_mm[0] + Number(button.dataset.dx)),
+      y_mm: round(at.offset_mm[1] + Number(button.dataset.dy)),
+      feed_mm_min: feed,
+    };
+  }
+  return {};
 }
 
 function readout(point) {
@@ -151,7 +178,7 @@ async function press(name, args = {}) {
 
 function bindControls() {
   for (const button of document.querySelectorAll("[data-control]")) {
-    button.addEventListener("click", () => press(button.dataset.control));
+    button.addEventListener("click", () => press(button.dataset.control, argsFor(button)));
   }
   $("#token-form").addEventListener("submit", (event) => event.preventDefault());
   $("#token").value = token;
