@@ -712,6 +712,7 @@ def test_request_names_are_published() -> None:
         "rearm",
         "ohmic_test",
         "thc_hold",
+        "thc",
         "abort",
         "height_override",
     } == REQUEST_NAMES

@@ -5,7 +5,7 @@ sender, each its own process.
 One cut, watched and steered from the page: the chart draws during the cut, cycle start on
 the page continues a G200 S1 program, torch up moves the target by 1 V, the history lists
 the cut and plots it, a refused material edit shows the daemon's error, and the controls
-are disabled with a banner once the board is gone. Prints the page's update rate and the
+are disabled with a banner once the board is gone, then the daemon. Prints the page's update rate and the
 browser's CPU use during the cut as JSON."""
 
 from __future__ import annotations
@@ -289,6 +289,13 @@ async def _steer(
         "return [...document.querySelectorAll('[data-control]')].map((b) => b.disabled);"
     )
     assert all(disabled)
+
+    # The daemon killed: its will says offline, and the banner says so.
+    assert stack.daemon is not None
+    stack.daemon.kill()
+    await browser.until(
+        "document.querySelector('#banner').textContent.startsWith('Daemon offline')", 10
+    )
     return {
         "telemetry_rate_hz": round(rate_hz, 1),
         "chart_draws_per_s": round((after[1] - before[1]) / (t1 - t0), 1),
