@@ -5,8 +5,8 @@ sender, each its own process.
 One cut, watched and steered from the page: the chart draws during the cut, cycle start on
 the page continues a G200 S1 program, torch up moves the target by 1 V, the history lists
 the cut and plots it, a refused material edit shows the daemon's error, and the controls
-are disabled with a banner once the board is gone, then the daemon. Prints the page's update rate and the
-browser's CPU use during the cut as JSON."""
+are disabled with a banner once the board is gone, then the daemon. Prints the page's
+update rate and the browser's CPU use during the cut as JSON."""
 
 from __future__ import annotations
 
