@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import random
 import statistics
-from collections import OrderedDict, deque
+from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -159,6 +159,10 @@ class BoardFirmware:
         # seq -> encoded reply of the last HOST_WINDOW executed side-effecting commands.
         self.replies: OrderedDict[int, bytes] = OrderedDict()
         self.rx_duplicates = 0
+        # Commands executed (duplicates answered from memory are not): what the host had the
+        # board do, for tests that check nothing was done that nobody asked for.
+        self.executed: Counter[str] = Counter()
+        self.torch_on_commands = 0
         # Fault injection: replies built while stalled are never sent.
         self.stall_replies_until_us = 0
         self.decoder = fp.StreamDecoder(on_error=self._on_bad_frame)
@@ -298,6 +302,7 @@ class BoardFirmware:
 
     def _command(self, msg: fp.Message) -> None:
         seq = msg.seq
+        self.executed[type(msg).__name__] += 1
         if isinstance(msg, fp.Heartbeat):
             self._ack(seq)
         elif isinstance(msg, fp.SetLease):
@@ -310,6 +315,7 @@ class BoardFirmware:
             if msg.on and self.faults:
                 self._nak(seq, NakCode.FAULT_LATCHED, self._lowest_fault())
             else:
+                self.torch_on_commands += msg.on
                 self._set_torch(msg.on)
                 self._ack(seq)
         elif isinstance(msg, fp.OhmicSense):

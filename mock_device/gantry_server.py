@@ -6,6 +6,8 @@ JSON lines over TCP, one request per line, one reply per request:
     {"op": "wait_idle"}                          -> {"ok": true, "x": .., "y": ..} when idle
     {"op": "hold"} / {"op": "resume"} / {"op": "clear"}
     {"op": "status"}     -> {"ok": true, "x", "y", "speed_mm_s", "idle", "queued"}
+    {"op": "inject", "hex": "00a1..."}  -> {"ok": true, "bytes": n}: raw bytes to the host,
+                            as if from the board's UART (the fuzz bench's frames)
 
 A bad line or op gets {"ok": false, "error": "..."} and changes nothing.
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+from collections.abc import Callable
 from typing import Any
 
 from .plant.gantry import GcodeError
@@ -26,8 +29,16 @@ MAX_LINE = 4096
 
 
 class GantryServer:
-    def __init__(self, plant: Plant, host: str, port: int) -> None:
+    def __init__(
+        self,
+        plant: Plant,
+        host: str,
+        port: int,
+        *,
+        inject: Callable[[bytes], int] | None = None,
+    ) -> None:
         self.plant = plant
+        self.inject = inject  # raw bytes to the host, as the board's UART would send them
         self.host = host
         self.port = port
         self._server: asyncio.Server | None = None
@@ -85,6 +96,12 @@ class GantryServer:
         except (ValueError, KeyError, TypeError):
             return {"ok": False, "error": "expected a JSON object with an 'op'"}
         gantry = self.plant.gantry
+        if op == "inject" and self.inject is not None:
+            try:
+                data = bytes.fromhex(str(request.get("hex", "")))
+            except ValueError:
+                return {"ok": False, "error": "inject: 'hex' is not hexadecimal"}
+            return {"ok": True, "bytes": self.inject(data)}
         if op == "line":
             try:
                 queued = gantry.feed_line(str(request.get("gcode", "")))

@@ -63,6 +63,7 @@ class MockBoardProcess:
         self._unplug_task: asyncio.Task[None] | None = None
         self._stall_done = False
         self._gantry: GantryServer | None = None
+        self.injected_bytes = 0
         self.latency: LatencyLog | None = None
         self._rx_loop_s = 0.0
         if options.latency_log is not None:
@@ -103,6 +104,13 @@ class MockBoardProcess:
             self.link.write(data)
             if log is not None:
                 log.samples_sent(log.take_pending(), asyncio.get_running_loop().time())
+
+    def inject(self, data: bytes) -> int:
+        """Raw bytes into the host-bound stream, as if from the board's UART (a fuzzer's
+        frames, through the real pty): how many were written."""
+        self.injected_bytes += len(data)
+        self.link.write(data)
+        return len(data)
 
     def _write_late(self, data: bytes, sent: list[fp.Samples] | None) -> None:
         self.link.write(data)
@@ -164,7 +172,7 @@ class MockBoardProcess:
         await self.link.open()
         ready = f"READY {self.boot_hex}"
         if self.options.gantry is not None:
-            self._gantry = GantryServer(self.board.plant, *self.options.gantry)
+            self._gantry = GantryServer(self.board.plant, *self.options.gantry, inject=self.inject)
             await self._gantry.start()
             ready += f" gantry={self._gantry.bound_port}"
         self._log("ready", link=str(getattr(self.link, "path", "")), boot_id=self.boot_hex)
@@ -237,5 +245,8 @@ class MockBoardProcess:
             rx_crc_errors=fw.decoder.stats.crc_errors,
             faults=f"0x{fw.faults:04x}",
             torch_on=fw.torch_on,
+            executed=dict(sorted(fw.executed.items())),
+            torch_on_commands=fw.torch_on_commands,
+            injected_bytes=self.injected_bytes,
             proto=f"{fp.PROTOCOL_MAJOR}.{fp.PROTOCOL_MINOR}",
         )
