@@ -223,8 +223,8 @@ class MqttGateway:
                 await client.subscribe(self.topics.request_filter, options=options)
             else:
                 await client.subscribe(self.topics.request_filter, qos=1)
-            if self.settings.sender_will_topic is not None:
-                await client.subscribe(self.settings.sender_will_topic, qos=1)
+            if self.settings.sender_will_filter is not None:
+                await client.subscribe(self.settings.sender_will_filter, qos=1)
             self.stats.connects += 1
             await self._announce(client)
             self._connected.set()
@@ -287,7 +287,7 @@ class MqttGateway:
         if name is not None:
             self._on_request(name, message)
             return
-        will = self.settings.sender_will_topic
+        will = self.settings.sender_will_filter
         if will is not None and message.topic.matches(will):
             self._on_sender_will(message)
             return

@@ -12,6 +12,9 @@ from .topics import Topics, filter_error
 
 __all__ = ["MqttSettings", "MqttTls"]
 
+AUTO_WILL = "auto"  # the reference sender's availability under this board's topics
+NO_WILL = "off"
+
 
 class MqttTls(BaseModel):
     """TLS to the broker; without ``ca_file`` the system's CA store is used."""
@@ -60,10 +63,11 @@ class MqttSettings(BaseModel):
     max_concurrent_requests: int = Field(default=16, ge=1, le=256)
     max_pending_requests: int = Field(default=64, ge=1, le=4096, description="beyond this: 'busy'")
     sender_will_topic: str | None = Field(
-        default=None,
+        default=AUTO_WILL,
         min_length=1,
         max_length=512,
-        description="filter where the sender's will arrives",
+        description="filter where the sender's will arrives; 'auto': <base_topic>/<board_id>/"
+        "sender/availability (the reference sender's), 'off': none",
     )
     reconnect_initial_s: float = Field(default=0.5, ge=0.01, le=60.0)
     reconnect_max_s: float = Field(default=30.0, ge=0.01, le=3600.0)
@@ -85,6 +89,8 @@ class MqttSettings(BaseModel):
     @field_validator("sender_will_topic")
     @classmethod
     def _valid_filter(cls, value: str | None) -> str | None:
+        if value in (AUTO_WILL, NO_WILL):
+            return value
         if value is not None and (error := filter_error(value)) is not None:
             raise ValueError(error)
         return value
@@ -95,14 +101,26 @@ class MqttSettings(BaseModel):
             raise ValueError("reconnect_max_s must be >= reconnect_initial_s")
         if self.max_pending_requests < self.max_concurrent_requests:
             raise ValueError("max_pending_requests must be >= max_concurrent_requests")
-        if self.sender_will_topic is not None:
+        will = self.sender_will_filter
+        if will is not None:
             for own in self.topics.samples():
-                if aiomqtt.Topic(own).matches(self.sender_will_topic):
+                if aiomqtt.Topic(own).matches(will):
                     raise ValueError(
                         f"sender_will_topic {self.sender_will_topic!r} overlaps the "
                         f"gateway's own topic {own!r}"
                     )
         return self
+
+    @property
+    def sender_will_filter(self) -> str | None:
+        """Where a sender's will is honoured: by default the reference sender's own
+        availability, so a sender killed mid-cut stops the cut (the torch does not burn on
+        at a standstill); None with ``off``."""
+        if self.sender_will_topic in (None, NO_WILL):
+            return None
+        if self.sender_will_topic == AUTO_WILL:
+            return f"{self.topics.root}/sender/availability"
+        return self.sender_will_topic
 
     @property
     def topics(self) -> Topics:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -10,6 +12,8 @@ import pytest
 
 from dthc_tools.demo import Stack, StackOptions, program_lines
 from dthc_tools.demo.summary import summarize
+from dthc_tools.procs import die_with_parent
+from tests.e2e.test_broker_restart import wait_for_state
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
@@ -98,3 +102,37 @@ async def test_a_daemon_killed_mid_cut_stops_the_sender_at_once(tmp_path: Path) 
     assert result.mock_exit["torch_on"] is False
     assert result.mock_exit["unsafe_torch_ms"] == 0
     assert result.mock_exit["violations"] == {}
+
+
+async def test_a_sender_killed_mid_cut_ends_the_cut_by_its_will(tmp_path: Path) -> None:
+    """SIGKILL the sender (its own process) mid-cut: with the daemon's default
+    sender_will_topic the sender's will ends the cut through the fault path; the torch
+    does not burn on at a standstill waiting for an M5 that never comes."""
+    options = StackOptions(tmp_path, scenario="masso_warped", broker="mosquitto")
+    program = tmp_path / "part.nc"
+    program.write_text("\n".join(program_lines("masso_sample")) + "\n")
+    async with Stack(options) as stack:
+        with (tmp_path / "sender.log").open("w") as log:
+            sender = subprocess.Popen(  # noqa: ASYNC220 - started once, killed below
+                [sys.executable, "-m", "dthc_bridge", "send", str(program),
+                 "--broker", f"mqtt://127.0.0.1:{stack.broker.port}", "--base-topic",
+                 stack.base, "--gantry", f"socket://127.0.0.1:{stack.gantry_port}"],
+                stdout=log, stderr=subprocess.STDOUT, preexec_fn=die_with_parent(),
+            )  # fmt: skip
+            try:
+                await wait_for_state(stack, {"cutting"}, 0, 40.0)
+                await asyncio.sleep(0.5)
+                sender.kill()
+                killed_at = stack.telemetry[-1]["t"]
+                ended = await wait_for_state(stack, {"faulted"}, len(stack.telemetry) - 1, 5.0)
+            finally:
+                sender.kill()
+                sender.wait(5)
+        ended_after_s = stack.telemetry[ended]["t"] - killed_at
+        result = await stack.finish()
+    faults = [e for e in result.events if e.get("type") == "fault" or e.get("type") == "pause"]
+    assert any("sender lost" in str(e.get("reason")) for e in faults), faults
+    print(f'{{"sender_killed_cut_ended_after_s": {ended_after_s:.3f}}}')
+    assert ended_after_s < 1.0, ended_after_s  # the will arrives as the connection drops
+    assert result.mock_exit["torch_on"] is False
+    assert result.mock_exit["unsafe_torch_ms"] == 0
