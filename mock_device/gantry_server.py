@@ -8,6 +8,8 @@ JSON lines over TCP, one request per line, one reply per request:
     {"op": "status"}     -> {"ok": true, "x", "y", "speed_mm_s", "idle", "queued"}
     {"op": "inject", "hex": "00a1..."}  -> {"ok": true, "bytes": n}: raw bytes to the host,
                             as if from the board's UART (the fuzz bench's frames)
+    {"op": "drop_frames", "rate": 0.01, "for_s": 10}  -> {"ok": true}: lose that share of the
+                            board's frames for a while (the fault bench)
 
 A bad line or op gets {"ok": false, "error": "..."} and changes nothing.
 """
@@ -36,9 +38,11 @@ class GantryServer:
         port: int,
         *,
         inject: Callable[[bytes], int] | None = None,
+        drop_frames: Callable[[float, float], None] | None = None,
     ) -> None:
         self.plant = plant
         self.inject = inject  # raw bytes to the host, as the board's UART would send them
+        self.drop_frames = drop_frames  # (rate, seconds): a flaky cable for a while
         self.host = host
         self.port = port
         self._server: asyncio.Server | None = None
@@ -102,6 +106,13 @@ class GantryServer:
             except ValueError:
                 return {"ok": False, "error": "inject: 'hex' is not hexadecimal"}
             return {"ok": True, "bytes": self.inject(data)}
+        if op == "drop_frames" and self.drop_frames is not None:
+            try:
+                rate, for_s = float(request["rate"]), float(request["for_s"])
+                self.drop_frames(rate, for_s)
+            except (KeyError, TypeError, ValueError) as exc:
+                return {"ok": False, "error": f"drop_frames: {exc}"}
+            return {"ok": True}
         if op == "line":
             try:
                 queued = gantry.feed_line(str(request.get("gcode", "")))

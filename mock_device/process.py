@@ -26,7 +26,7 @@ from pathlib import Path
 
 import firmware_protocol as fp
 
-from .faults import FaultPlan
+from .faults import FaultPlan, check_rate
 from .gantry_server import GantryServer
 from .latency_log import LatencyLog
 from .links import BoardLink
@@ -112,6 +112,19 @@ class MockBoardProcess:
         self.link.write(data)
         return len(data)
 
+    def drop_frames(self, rate: float, for_s: float) -> None:
+        """Lose ``rate`` of the board's frames for ``for_s`` seconds, then the plan's own."""
+        check_rate("rate", rate)
+        injector = self.board.faults
+        normal = injector.plan
+        injector.plan = dataclasses.replace(normal, drop_frame_rate=rate)
+        self._log("drop_frames", rate=rate, for_s=for_s)
+
+        def restore() -> None:
+            injector.plan = normal
+
+        asyncio.get_running_loop().call_later(for_s, restore)
+
     def _write_late(self, data: bytes, sent: list[fp.Samples] | None) -> None:
         self.link.write(data)
         if self.latency is not None and sent:
@@ -172,7 +185,10 @@ class MockBoardProcess:
         await self.link.open()
         ready = f"READY {self.boot_hex}"
         if self.options.gantry is not None:
-            self._gantry = GantryServer(self.board.plant, *self.options.gantry, inject=self.inject)
+            self._gantry = GantryServer(
+                self.board.plant, *self.options.gantry, inject=self.inject,
+                drop_frames=self.drop_frames,
+            )  # fmt: skip
             await self._gantry.start()
             ready += f" gantry={self._gantry.bound_port}"
         self._log("ready", link=str(getattr(self.link, "path", "")), boot_id=self.boot_hex)

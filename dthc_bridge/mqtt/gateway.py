@@ -56,6 +56,9 @@ ONLINE: Final = b'{"state":"online"}'
 OFFLINE: Final = b'{"state":"offline"}'
 GOODBYE_TIMEOUT_S: Final = 2.0  # shutdown: flush responses and say offline, at most this
 SENDER_LOST_TIMEOUT_S: Final = 5.0
+SENDER_WILL_CONFIRM_S: Final = 0.25
+"""How long a sender's will waits for our own disconnection before it counts as the sender's
+death (the sender waits as long for the daemon's will, for the same reason)."""
 RESPONSE_TOPIC_MAX_BYTES: Final = 1024
 
 T = TypeVar("T")
@@ -456,13 +459,21 @@ class MqttGateway:
         if not is_offline_payload(bytes(message.payload)):
             log.debug("sender_will_other", topic=topic)
             return
-        self.stats.sender_lost += 1
-        log.warning("sender_lost", topic=topic)
-        task = asyncio.create_task(
-            self._call_sender_lost(f"sender last will on {topic}"), name="mqtt-sender-lost"
-        )
+        task = asyncio.create_task(self._confirm_sender_lost(topic), name="mqtt-sender-lost")
         self._background.add(task)
         task.add_done_callback(self._background.discard)
+
+    async def _confirm_sender_lost(self, topic: str) -> None:
+        """A broker shutting down publishes every client's will, the sender's too, then
+        drops us within milliseconds: a will followed at once by our own disconnection is
+        the broker going away (the cut goes on: THC is local), not the sender dying."""
+        await asyncio.sleep(SENDER_WILL_CONFIRM_S)
+        if not self._connected.is_set():
+            log.warning("sender_will_was_the_broker", topic=topic)
+            return
+        self.stats.sender_lost += 1
+        log.warning("sender_lost", topic=topic)
+        await self._call_sender_lost(f"sender last will on {topic}")
 
     async def _call_sender_lost(self, reason: str) -> None:
         try:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from dthc_bridge.logs import configure_logging, logging_configured
 
-from . import codec, control, fuzz, latency, scale, soak
+from . import codec, control, faults, fuzz, latency, scale, soak
 from .report import print_report, report_header
 
 __all__ = ["SUITES", "Suite", "build_parser", "main", "run_suite"]
@@ -70,6 +70,12 @@ SUITES: dict[str, Suite] = {
             "minutes of cutting under bit errors, drops, an unplug, a reboot, a broker restart",
             soak.add_arguments,
             soak.run,
+        ),
+        Suite(
+            "faults",
+            "every fault at every phase of a cut: torch-on, lost requests, recovery",
+            faults.add_arguments,
+            faults.run,
         ),
         Suite(
             "fuzz",

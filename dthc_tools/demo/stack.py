@@ -297,11 +297,12 @@ class Stack:
         raise RuntimeError("the daemon did not bring the board online in time: see daemon.log")
 
     def daemon_client(
-        self, cls: type[DaemonClient] = DaemonClient, timeout_s: float = 60.0
+        self, cls: type[DaemonClient] = DaemonClient, timeout_s: float = 60.0, role: str = "sender"
     ) -> DaemonClient:
         return cls(
             "127.0.0.1", self.broker.port, base_topic=self.base,
             board_id=self.options.board_id, protocol=self.broker.protocol, timeout_s=timeout_s,
+            role=role,
         )  # fmt: skip
 
     async def send(
@@ -342,7 +343,8 @@ class Stack:
             await backend.close()
 
     async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
-        daemon = self.daemon_client()
+        # A tool's client, not a sender: its end must not read as the sender's will.
+        daemon = self.daemon_client(role="tool")
         async with daemon.connected():
             return await daemon.request(name, **args)
 

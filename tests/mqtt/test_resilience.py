@@ -226,3 +226,23 @@ async def test_tls_without_the_brokers_ca_does_not_connect(tls_broker: Broker) -
         await asyncio.sleep(0.5)
         assert not gateway.is_connected
         assert gateway.stats.connects == 0
+
+
+async def test_a_broker_shutting_down_sends_the_senders_will_but_the_cut_goes_on(
+    own_broker: Broker,
+) -> None:
+    """mosquitto publishes every client's will as it shuts down, then drops the daemon: that
+    will is the broker going away (THC is local, the cut goes on), not the sender dying."""
+    will_topic = f"{unique_base()}/sender/availability"
+    settings = fast_settings(own_broker, sender_will_topic=will_topic)
+    async with (
+        running_gateway(settings) as (_, controller),
+        helper_process("sender", own_broker, will_topic),
+    ):
+        controller.state = {"state": "cutting", "armed": True, "line": 40}
+        await asyncio.sleep(0.2)
+        own_broker.stop()
+        await asyncio.sleep(0.6)  # well past the confirmation window
+        own_broker.start()
+        await asyncio.sleep(0.3)
+    assert controller.sender_lost_calls == []
