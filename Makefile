@@ -52,7 +52,7 @@ unit: $(STAMP)
 test: $(STAMP) broker browser systemd-tools lint typecheck unit
 
 bench: $(STAMP)
-	for suite in codec control latency soak fuzz scale; do $(BIN)/dthc-bridge bench $$suite --json; done
+	for suite in codec control latency soak faults fuzz scale; do $(BIN)/dthc-bridge bench $$suite --json; done
 
 demo: $(STAMP)
 	$(BIN)/dthc-bridge demo

@@ -120,6 +120,8 @@ class MqttGateway:
         )
         self._background: set[asyncio.Task[None]] = set()
         self._connected = asyncio.Event()
+        self._epoch = 0  # connections so far: a will is judged against the one it came on
+        self._lost_epoch = -1  # the last connection whose message stream broke
         self._last_state: bytes | None = None
         self._last_board: bytes | None = None
         self._last_materials: bytes | None = None
@@ -229,6 +231,7 @@ class MqttGateway:
             if self.settings.sender_will_filter is not None:
                 await client.subscribe(self.settings.sender_will_filter, qos=1)
             self.stats.connects += 1
+            self._epoch += 1
             await self._announce(client)
             self._connected.set()
             log.info(
@@ -278,11 +281,18 @@ class MqttGateway:
     # --- inbound -------------------------------------------------------------------------------
 
     async def _read(self, client: aiomqtt.Client) -> None:
-        async for message in client.messages:
-            try:
-                self._on_message(message)
-            except Exception:  # never let one message end the connection
-                log.exception("mqtt_message_failed", topic=message.topic.value)
+        try:
+            async for message in client.messages:
+                try:
+                    self._on_message(message)
+                except Exception:  # never let one message end the connection
+                    log.exception("mqtt_message_failed", topic=message.topic.value)
+        except aiomqtt.MqttError:
+            # Lost: say so now, not once the other loops have wound down (a publish may
+            # wait for its acknowledgement first); a sender's will that came just before
+            # is then seen for what it is, the broker going away.
+            self._lost_epoch = self._epoch
+            raise
 
     def _on_message(self, message: aiomqtt.Message) -> None:
         topic = message.topic.value
@@ -467,8 +477,9 @@ class MqttGateway:
         """A broker shutting down publishes every client's will, the sender's too, then
         drops us within milliseconds: a will followed at once by our own disconnection is
         the broker going away (the cut goes on: THC is local), not the sender dying."""
+        epoch = self._epoch
         await asyncio.sleep(SENDER_WILL_CONFIRM_S)
-        if not self._connected.is_set():
+        if not self._connected.is_set() or self._epoch != epoch or self._lost_epoch == epoch:
             log.warning("sender_will_was_the_broker", topic=topic)
             return
         self.stats.sender_lost += 1

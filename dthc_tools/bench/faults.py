@@ -42,7 +42,9 @@ from ..demo import Stack, StackOptions
 from ..procs import die_with_parent
 from .report import Goal, goals_block
 
-__all__ = ["FAULTS", "PHASES", "add_arguments", "cell_holds", "recovery_s", "run"]
+__all__ = [
+    "FAULTS", "PHASES", "add_arguments", "cell_holds", "recovery_s", "run", "silent_resumes",
+]  # fmt: skip
 
 RESTART_SEC = 2.0  # systemd/dthc-bridge.service: Restart=on-failure, RestartSec=2s
 RECOVERY_GOAL_S = 2.0
@@ -290,6 +292,7 @@ async def _cell(fault: str, phase: str, workdir: Path) -> dict[str, Any]:
         "unsafe_torch_ms": float(mock.get("unsafe_torch_ms", float("nan"))),
         "requests_lost": lost,
         "requests_duplicated": max(0, torch_on - attempts),
+        "silent_resumes": silent_resumes(result.events),
         "recovery_s": recovery,
         "outcome": outcome,
         "restart_line": report.get("restart_line") if report else None,
@@ -298,6 +301,23 @@ async def _cell(fault: str, phase: str, workdir: Path) -> dict[str, Any]:
     }  # fmt: skip
     cell_result["pass"] = cell_holds(cell_result)
     return cell_result
+
+
+def silent_resumes(events: list[dict[str, Any]]) -> int:
+    """Torch-on attempts (``arc_wait``) after the daemon ended a cut through the fault path
+    with no re-arm since (a re-arm is the only way out of ``faulted``): a cut that went on
+    by itself after a fault."""
+    count = 0
+    faulted = False
+    for event in _events(events):
+        state = event.get("state")
+        if state == "faulted":
+            faulted = True
+        elif state == "idle" and event.get("previous") == "faulted":
+            faulted = False  # re-armed
+        elif state == "arc_wait" and faulted:
+            count += 1
+    return count
 
 
 def _events(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -310,6 +330,7 @@ def cell_holds(cell: dict[str, Any]) -> bool:
         cell["unsafe_torch_ms"] == 0.0
         and cell["requests_lost"] == 0
         and cell["requests_duplicated"] == 0
+        and cell.get("silent_resumes", 0) == 0
         and cell["recovery_s"] is not None
         and cell["recovery_s"] <= RECOVERY_GOAL_S
         and not cell["violations"]
@@ -344,6 +365,7 @@ async def _matrix(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
         "unsafe_torch_ms": sum(c["unsafe_torch_ms"] for c in cells),
         "requests_lost": sum(c["requests_lost"] for c in cells),
         "requests_duplicated": sum(c["requests_duplicated"] for c in cells),
+        "silent_resumes": sum(c["silent_resumes"] for c in cells),
         "worst_recovery_s": worst[0], "worst_recovery_cell": worst[1],
         "cells": len(cells), "cells_failed": sum(not c["pass"] for c in cells),
     }  # fmt: skip
@@ -351,6 +373,7 @@ async def _matrix(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
         Goal("unsafe_torch_ms", float(totals["unsafe_torch_ms"]), 0, at_most=True, unit=" ms"),
         Goal("requests_lost", float(totals["requests_lost"]), 0, at_most=True),
         Goal("requests_duplicated", float(totals["requests_duplicated"]), 0, at_most=True),
+        Goal("silent_resumes", float(totals["silent_resumes"]), 0, at_most=True),
         Goal("worst_recovery_s", float(worst[0]), RECOVERY_GOAL_S, at_most=True, unit=" s"),
         Goal("cells_failed", float(totals["cells_failed"]), 0, at_most=True),
     ]

@@ -14,10 +14,11 @@ from typing import Any
 import aiomqtt
 import pytest
 
-from dthc_bridge.mqtt import MqttTls
+from dthc_bridge.mqtt import MqttGateway, MqttTls
 from dthc_tools.procs import die_with_parent
 
 from .conftest import USERS, Broker
+from .fakes import FakeController
 from .helpers import fast_settings, open_probe, running_gateway, unique_base
 
 pytestmark = pytest.mark.slow
@@ -246,3 +247,22 @@ async def test_a_broker_shutting_down_sends_the_senders_will_but_the_cut_goes_on
         own_broker.start()
         await asyncio.sleep(0.3)
     assert controller.sender_lost_calls == []
+
+
+async def test_a_will_on_a_connection_whose_stream_broke_is_not_a_dead_sender(
+    broker: Broker,
+) -> None:
+    """The read loop marks its connection lost at once, before the other loops wind down
+    (a publish may still wait for its acknowledgement, the connection still looking up):
+    a will that came on that connection is the broker going away. Found by the fault
+    bench: 2 of 7 broker restarts ended the cut before this."""
+    will_topic = f"{unique_base()}/sender/availability"
+    controller = FakeController()
+    gateway = MqttGateway(fast_settings(broker, sender_will_topic=will_topic), controller)
+    gateway._connected.set()  # connected, as far as the other loops know
+    gateway._lost_epoch = gateway._epoch  # but the message stream broke
+    await gateway._confirm_sender_lost(will_topic)
+    assert controller.sender_lost_calls == []
+    gateway._lost_epoch = -1  # a healthy connection: the will is the sender's death
+    await gateway._confirm_sender_lost(will_topic)
+    assert controller.sender_lost_calls == [f"sender last will on {will_topic}"]
