@@ -59,17 +59,17 @@ def test_a_cell_holds_only_when_every_promise_does() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(150)
-def test_three_cells_mid_cut_hold() -> None:
+@pytest.mark.timeout(120)
+def test_two_cells_mid_cut_hold() -> None:
     """Mid-cut: the daemon stopped 0.5 s (the board's 250 ms lease turns the torch off by
-    itself; the program stops naming the fault and the cut to restart from), the broker
-    restarted (the cut goes on: its will of the sender is the broker going away), the
-    sender killed (its will ends the cut)."""
+    itself; the program stops naming the fault and the cut to restart from), the sender
+    killed (its will ends the cut). A broker restart mid-cut is tests/e2e's and
+    tests/mqtt's (the will a broker sends as it shuts down)."""
     parser = argparse.ArgumentParser()
     faults.add_arguments(parser)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args([
-        "--faults", "daemon_stop_0.5s,broker_restart,sender_kill", "--phases", "cutting",
+        "--faults", "daemon_stop_0.5s,sender_kill", "--phases", "cutting",
         "--json",
     ])  # fmt: skip
     result = faults.run(args)
@@ -77,8 +77,7 @@ def test_three_cells_mid_cut_hold() -> None:
     assert result["unsafe_torch_ms"] == 0.0
     matrix = result["matrix"]
     assert isinstance(matrix, list)
-    stopped, restarted, killed = matrix
+    stopped, killed = matrix
     assert "LEASE_EXPIRED" in stopped["outcome"]
     assert stopped["restart_line"] == 5
-    assert restarted["outcome"] == "completed"
     assert any("sender lost" in reason for reason in killed["daemon_faults"]), killed
