@@ -30,7 +30,7 @@ from .controller.commands import Abort, Command, CommandError, CycleStart, ThcHo
 from .controller.dialect import Dialect
 from .controller.gcode import parse_host_motion, parse_line, parse_request
 from .controller.plasma import PlasmaController
-from .controller.sequence import CutSequence, with_board_limits
+from .controller.sequence import CutSequence, State, with_board_limits
 from .controller.words import cutting_feed_mm_min
 from .events import (
     ArcLost,
@@ -106,7 +106,7 @@ class ControllerService:
         self._torch_off: asyncio.Task[None] | None = None
         self._torch_off_sent_s = -math.inf
         # Published as a ``sequence`` event whenever it changes.
-        self._state_seen = str(controller.sequence.state)
+        self._state_seen = controller.sequence.state
         client.add_listener(self._on_board)
         client.add_state_listener(self._on_link_state)
         client.add_error_listener(self._on_handler_error)
@@ -390,10 +390,10 @@ class ControllerService:
                     self._publish_event(ProgramPaused(self.now, action.reason, str(action.cause)))
             else:
                 self._work.put_nowait(action)
-        state = str(self.sequence.state)
-        if state != self._state_seen:
-            error = self.sequence.error if state == "faulted" else ""
-            self._publish_event(SequenceChanged(self.now, state, self._state_seen, error))
+        state = self.sequence.state  # compared as it is: pump runs for every sample batch
+        if state is not self._state_seen:
+            error = self.sequence.error if state is State.FAULTED else ""
+            self._publish_event(SequenceChanged(self.now, str(state), str(self._state_seen), error))
             self._state_seen = state
 
     def _send_velocity(self, velocity_mm_s: float) -> None:

@@ -40,6 +40,7 @@ from typing import Any
 
 from ..demo import Stack, StackOptions
 from ..procs import die_with_parent
+from .mock_control import mock_control
 from .report import Goal, goals_block
 
 __all__ = [
@@ -127,24 +128,14 @@ async def _starve(cell: Cell) -> None:
             hog.wait()
 
 
-async def _control(cell: Cell, request: dict[str, Any]) -> None:
-    reader, writer = await asyncio.open_connection("127.0.0.1", cell.stack.gantry_port)
-    try:
-        writer.write(json.dumps(request).encode() + b"\n")
-        await writer.drain()
-        reply = json.loads(await reader.readline())
-    finally:
-        writer.close()
-    if not reply.get("ok"):
-        raise RuntimeError(f"the mock refused {request['op']}: {reply.get('error')}")
-
-
 async def _corrupt_burst(cell: Cell) -> None:
-    await _control(cell, {"op": "inject", "hex": random.Random(3).randbytes(1800).hex()})
+    async with mock_control(cell.stack.gantry_port) as mock:
+        await mock.request("inject", hex=random.Random(3).randbytes(1800).hex())
 
 
 async def _frame_loss(cell: Cell) -> None:
-    await _control(cell, {"op": "drop_frames", "rate": 0.01, "for_s": 10.0})
+    async with mock_control(cell.stack.gantry_port) as mock:
+        await mock.request("drop_frames", rate=0.01, for_s=10.0)
     await asyncio.sleep(10.0)
 
 
@@ -175,10 +166,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--phases", help="comma-separated subset of: " + ", ".join(PHASES))
 
 
-def _sequence(stack: Stack) -> list[dict[str, Any]]:
-    return [e for e in stack.events if e.get("topic") == "event" and e.get("type") == "sequence"]
-
-
 async def _phase(cell: Cell, phase: str, timeout_s: float = 60.0) -> None:
     """Until the program is in ``phase`` (the daemon's sequence events, exact)."""
     stack = cell.stack
@@ -186,7 +173,7 @@ async def _phase(cell: Cell, phase: str, timeout_s: float = 60.0) -> None:
     settle = {"cutting": 1.2, "thc_locked": 1.2}.get(phase, 0.0)  # THC delay: target taken
     target = {"between_cuts": "idle", "thc_locked": "cutting"}.get(phase, phase)
     while time.monotonic() < deadline:
-        seen = _sequence(stack)
+        seen = _events(stack.events)
         cut_done = any(e["previous"] == "to_safe_height" for e in seen)
         if seen and seen[-1]["state"] == target and (phase != "between_cuts" or cut_done):
             await asyncio.sleep(settle)
@@ -213,10 +200,6 @@ async def _until_back(stack: Stack, struck_at: float, timeout_s: float = 15.0) -
         if recovery_s(stack.events, struck_at, time.monotonic()) is not None:
             return
         await asyncio.sleep(0.05)
-
-
-def _recovery_s(stack: Stack, struck_at: float, fault_end: float) -> float | None:
-    return recovery_s(stack.events, struck_at, fault_end)
 
 
 def recovery_s(events: list[dict[str, Any]], struck_at: float, fault_end: float) -> float | None:
@@ -273,7 +256,7 @@ async def _cell(fault: str, phase: str, workdir: Path) -> dict[str, Any]:
             if out.strip():
                 report = json.loads(out.strip().splitlines()[-1])
         await _until_back(stack, struck_at)
-        recovery = _recovery_s(stack, struck_at, cell.fault_end)
+        recovery = recovery_s(stack.events, struck_at, cell.fault_end)
         result = await stack.finish()
     faults_seen = [
         str(e.get("reason") or e.get("code")) for e in result.events

@@ -44,6 +44,7 @@ from dthc_bridge.controller.gcode import REQUEST_NAMES, parse_line, parse_reques
 from dthc_bridge.mqtt.topics import REQUEST_NAME
 
 from ..demo import Stack, StackOptions
+from .mock_control import mock_control
 from .report import Goal, goals_block
 
 __all__ = ["FrameFuzzer", "PayloadFuzzer", "add_arguments", "run"]
@@ -326,32 +327,23 @@ def _rss_kb(pid: int) -> int:
 
 async def _inject(port: int, frames: Iterator[bytes]) -> int:
     """Write the frames through the mock's control port, a chunk at a time."""
-    reader, writer = await asyncio.open_connection("127.0.0.1", port)
     written = 0
-    try:
+    async with mock_control(port) as mock:
+
+        async def send(chunk: bytes) -> int:
+            reply = await mock.request("inject", hex=chunk.hex())
+            await asyncio.sleep(0.002)  # the daemon reads the pty meanwhile
+            return int(reply["bytes"])
+
         chunk = b""
         for frame in frames:
             if chunk and len(chunk) + len(frame) > CHUNK_BYTES:
-                written += await _inject_chunk(reader, writer, chunk)
+                written += await send(chunk)
                 chunk = b""
             chunk += frame
         if chunk:
-            written += await _inject_chunk(reader, writer, chunk)
-    finally:
-        writer.close()
+            written += await send(chunk)
     return written
-
-
-async def _inject_chunk(
-    reader: asyncio.StreamReader, writer: asyncio.StreamWriter, data: bytes
-) -> int:
-    writer.write(json.dumps({"op": "inject", "hex": data.hex()}).encode() + b"\n")
-    await writer.drain()
-    reply = json.loads(await reader.readline())
-    if not reply.get("ok"):
-        raise RuntimeError(f"the mock refused the injection: {reply.get('error')}")
-    await asyncio.sleep(0.002)  # the daemon reads the pty meanwhile
-    return int(reply["bytes"])
 
 
 async def _publish(stack: Stack, fuzzer: PayloadFuzzer, count: int) -> Counter[str]:

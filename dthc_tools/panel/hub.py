@@ -33,7 +33,6 @@ class PanelHub:
         self.history = history
         self.recorder = CutRecorder(first_number=history.next_number)
         self.view = LiveView()
-        self.telemetry_points = 0
         self._pages: set[asyncio.Queue[str]] = set()
         self._last_view = ""
         client.on_topic("state", self._on_state)
@@ -74,7 +73,6 @@ class PanelHub:
         self._push_view()
 
     def _on_telemetry(self, point: dict[str, Any]) -> None:
-        self.telemetry_points += 1
         self.recorder.on_telemetry(point)
         self._push("telemetry", point)
 
@@ -130,10 +128,6 @@ class PanelHub:
             if queue.full():
                 queue.get_nowait()
             queue.put_nowait("")
-
-    @property
-    def pages(self) -> int:
-        return len(self._pages)
 
     async def watch_links(self) -> None:
         """Until cancelled: the broker and daemon links, which change without a message."""

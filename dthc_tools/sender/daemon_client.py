@@ -307,9 +307,7 @@ class DaemonClient:
         A broker restart meanwhile is ridden out: the request is published again, with
         the same transaction, once the connection is back."""
         await self._wait_online(name)
-        transaction = f"{self._run_id}-{next(self._ids)}"
-        future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
-        self._waiting[transaction] = future
+        transaction, future = self._expect_answer()
         topic = f"{self.root}/request/{name}"
         payload = json.dumps({**args, "transaction": transaction})
         self._unanswered[transaction] = (topic, payload)
@@ -324,10 +322,7 @@ class DaemonClient:
         finally:
             self._waiting.pop(transaction, None)
             self._unanswered.pop(transaction, None)
-        if response.get("status") != "ok":
-            raise DaemonError(str(response.get("error") or "error"))
-        data: dict[str, Any] = response.get("data") or {}
-        return data
+        return _data(response)
 
     async def request_to(self, role: str, name: str, /, **args: Any) -> dict[str, Any]:
         """A request to another client of the board (``sender``): published once, answered
@@ -336,9 +331,7 @@ class DaemonClient:
         client = self._client
         if client is None:
             raise DaemonError(f"{name}: not connected to the broker")
-        transaction = f"{self._run_id}-{next(self._ids)}"
-        future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
-        self._waiting[transaction] = future
+        transaction, future = self._expect_answer()
         payload = json.dumps({**args, "transaction": transaction})
         try:
             await client.publish(f"{self.root}/{role}/request/{name}", payload, qos=1)
@@ -350,10 +343,14 @@ class DaemonClient:
             raise DaemonError(f"{name}: {exc}") from None
         finally:
             self._waiting.pop(transaction, None)
-        if response.get("status") != "ok":
-            raise DaemonError(str(response.get("error") or "error"))
-        data: dict[str, Any] = response.get("data") or {}
-        return data
+        return _data(response)
+
+    def _expect_answer(self) -> tuple[str, asyncio.Future[dict[str, Any]]]:
+        """A new transaction, unique to this run, and the future its response resolves."""
+        transaction = f"{self._run_id}-{next(self._ids)}"
+        future: asyncio.Future[dict[str, Any]] = asyncio.get_running_loop().create_future()
+        self._waiting[transaction] = future
+        return transaction, future
 
     async def notify(self, name: str, /, **args: Any) -> None:
         """A report, not a command: published at QoS 0 without a transaction, its answer not
@@ -382,3 +379,11 @@ class DaemonClient:
         if xy is not None:
             args["x"], args["y"] = xy
         return await self.request("gcode", **args)
+
+
+def _data(response: dict[str, Any]) -> dict[str, Any]:
+    """A response's data; DaemonError with its error when it is not ok."""
+    if response.get("status") != "ok":
+        raise DaemonError(str(response.get("error") or "error"))
+    data: dict[str, Any] = response.get("data") or {}
+    return data

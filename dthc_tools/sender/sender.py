@@ -298,7 +298,7 @@ class Sender:
         for index, step in enumerate(plan.steps()):
             number = step.source_line
             self.progress.line = number
-            if resumed is not None and resumed.skips(index, step):
+            if resumed is not None and index < resumed.step_index:
                 restart.skip(step)
                 if not resumed.replays(index, step):
                     self.progress.cut += _cuts_in(step, plan)
@@ -493,9 +493,6 @@ class _Resumption:
             path.cut_steps[segment.cut] if segment.cut is not None else segment.step_index
         )
         self.replay: list[DaemonStep] = []
-
-    def skips(self, index: int, _step: Step) -> bool:
-        return index < self.step_index
 
     def replays(self, index: int, step: Step) -> bool:
         if index >= self.replay_from and isinstance(step, DaemonStep):
