@@ -8,7 +8,6 @@ fails the handshake and the suite ends at once instead of waiting on every check
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 import time
@@ -22,6 +21,7 @@ import pytest
 
 from dthc_bridge.conformance import CHECK_NAMES, EXIT_FAILED, EXIT_PASSED
 from dthc_tools.procs import die_with_parent
+from tests.processes import stop
 
 pytestmark = pytest.mark.slow
 
@@ -65,15 +65,7 @@ def mock_board(tmp: Path, variant: str = "good") -> Iterator[tuple[Path, int]]:
         assert proc.stdout.readline().startswith("READY")
         yield pty, proc.pid
     finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(5)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(5)
-            if proc.stdout is not None:
-                proc.stdout.close()
+        stop(proc)
 
 
 def run_conformance(*args: str) -> SuiteRun:

@@ -26,6 +26,7 @@ import pytest
 from dthc_tools.demo import Stack, StackOptions
 from dthc_tools.procs import die_with_parent
 from tests.e2e.test_broker_restart import wait_for_state
+from tests.processes import stop
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
@@ -138,15 +139,9 @@ class Panel:
         self.url = line.split()[1]
 
     def stop(self) -> int:
-        self.proc.terminate()
         try:
-            return self.proc.wait(10)
+            return stop(self.proc)
         finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
-                self.proc.wait(5)
-            assert self.proc.stdout is not None
-            self.proc.stdout.close()
             self.log.close()
 
 

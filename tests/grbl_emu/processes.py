@@ -4,12 +4,12 @@ stopped with SIGTERM, their exit figures read from the log."""
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 from pathlib import Path
 from typing import Any
 
 from dthc_tools.procs import die_with_parent
+from tests.processes import stop
 
 __all__ = ["exit_line", "start_ready", "stop"]
 
@@ -28,19 +28,6 @@ def start_ready(cmd: list[str], log: Path) -> tuple[subprocess.Popen[str], str]:
     ready = proc.stdout.readline()
     assert ready.startswith("READY"), ready + log.read_text()
     return proc, ready.strip()
-
-
-def stop(proc: subprocess.Popen[str]) -> int:
-    """SIGTERM, wait up to 5 s (then kill); the exit status."""
-    proc.send_signal(signal.SIGTERM)
-    try:
-        return proc.wait(5)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
-        if proc.stdout is not None:
-            proc.stdout.close()
 
 
 def exit_line(log: Path) -> dict[str, Any]:

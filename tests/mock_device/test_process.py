@@ -16,6 +16,7 @@ import serial
 
 import firmware_protocol as fp
 from dthc_tools.procs import die_with_parent
+from tests.processes import stop
 
 pytestmark = pytest.mark.slow
 
@@ -39,20 +40,7 @@ def mock(tmp_path: Path) -> Iterator[tuple[subprocess.Popen[str], Path]]:
     pty = tmp_path / "dthc0"
     proc = _start(pty, "--unplug-for", "0.5")
     yield proc, pty
-    _stop(proc)
-
-
-def _stop(proc: subprocess.Popen[str]) -> int:
-    """SIGTERM, wait up to 5 s (then kill); the exit status."""
-    proc.send_signal(signal.SIGTERM)
-    try:
-        return proc.wait(5)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-        for stream in (proc.stdout, proc.stderr):
-            if stream is not None:
-                stream.close()
+    stop(proc)
 
 
 def _exchange(port: serial.Serial, msg: fp.Message, want: type[fp.Message]) -> fp.Message:
@@ -170,7 +158,7 @@ def test_latency_log_records_receipts_and_sends(tmp_path: Path) -> None:
                 while time.monotonic() < deadline:
                     seen += [m for m in decoder.feed(port.read(256)) if isinstance(m, fp.Samples)]
     finally:
-        status = _stop(proc)
+        status = stop(proc)
     assert status == 0
     records = [json.loads(line) for line in log.read_text().splitlines()]
     assert records[0]["kind"] == "start"

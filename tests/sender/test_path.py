@@ -11,7 +11,9 @@ from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.program.plan import ProgramPlan
 from dthc_tools.sender.backend import BackendError
 from dthc_tools.sender.path import PathPoint, ProgramPath, build_path
+from dthc_tools.sender.recovery import PausedProgram
 from mock_device.plant.gantry import Gantry
+from tests.sender.test_sender_lines import FakeBackend
 
 # Three cuts: a straight one, one with a counter-clockwise half circle, an inch-free third.
 PROGRAM = [
@@ -104,3 +106,37 @@ def test_inch_programs_are_tracked_in_millimetres_and_written_in_inches() -> Non
     assert list(path.moves(PathPoint(1, 25.4), PathPoint(1, 0.0), 254.0)) == [
         "G1 X1.0000 Y1.0000 F10"
     ]
+
+
+class _Daemon:
+    """Answers ``status`` with the cut sequence's state."""
+
+    def __init__(self, state: str) -> None:
+        self.state = state
+
+    async def request(self, name: str, /, **_args: object) -> dict[str, object]:
+        assert name == "status"
+        return {"state": self.state}
+
+
+class _Sender:
+    def __init__(self, state: str) -> None:
+        self.daemon = _Daemon(state)
+        self.backend = FakeBackend()
+
+
+@pytest.mark.parametrize("state", ["cutting", "pierce_delay", "probing"])
+async def test_paused_motion_never_moves_while_a_cut_may_be_lit(state: str) -> None:
+    """The torch never lights during paused motion: the daemon must say no cut runs
+    (idle or faulted), else nothing is queued and the reason names its state."""
+    sender = _Sender(state)
+    paused = PausedProgram(sender, path_of(PROGRAM), up_to_step=None)
+    paused.point = PathPoint(1, 50.0)
+    with pytest.raises(BackendError, match=f"a cut is running \\({state}\\): stop it first"):
+        await paused.move_along(-20.0)
+    with pytest.raises(BackendError, match="a cut is running"):
+        await paused.set_offset(1.0, 0.0)
+    assert sender.backend.queued == []
+    sender.daemon.state = "faulted"
+    await paused.move_along(-20.0)
+    assert sender.backend.queued == ["G21 G90", "G1 X40.0000 Y10.0000 F1000"]
