@@ -9,14 +9,62 @@
 /* cal_scale is moved as the 4 bytes of an IEEE-754 binary32 `float`. */
 typedef char dthc_float_must_be_32_bits[(sizeof(float) == 4) ? 1 : -1];
 
-/* --- CRC-16/CCITT-FALSE ------------------------------------------------------------------ */
+/* --- CRC-16/CCITT-FALSE ------------------------------------------------------------------
+ * Table-driven, one lookup per byte: crc' = (crc << 8) ^ T[(crc >> 8) ^ byte], where T[i] is
+ * the CRC register after shifting i << 8 through the polynomial 0x1021 eight times. The 512
+ * bytes go to flash on AVR (a const table would otherwise be copied to its 2 KB of RAM). */
 
-/* Table-free bytewise form of the polynomial 0x1021 (x^16 + x^12 + x^5 + 1). */
+#ifdef __AVR__
+#include <avr/pgmspace.h>
+#define DTHC_CRC_TABLE_ATTR PROGMEM
+#define DTHC_CRC_TABLE_READ(i) ((uint16_t)pgm_read_word(&dthc_crc_table[(i)]))
+#else
+#define DTHC_CRC_TABLE_ATTR
+#define DTHC_CRC_TABLE_READ(i) (dthc_crc_table[(i)])
+#endif
+
+static const uint16_t dthc_crc_table[256] DTHC_CRC_TABLE_ATTR = {
+    0x0000, 0x1021, 0x2042, 0x3063, 0x4084, 0x50A5, 0x60C6, 0x70E7,
+    0x8108, 0x9129, 0xA14A, 0xB16B, 0xC18C, 0xD1AD, 0xE1CE, 0xF1EF,
+    0x1231, 0x0210, 0x3273, 0x2252, 0x52B5, 0x4294, 0x72F7, 0x62D6,
+    0x9339, 0x8318, 0xB37B, 0xA35A, 0xD3BD, 0xC39C, 0xF3FF, 0xE3DE,
+    0x2462, 0x3443, 0x0420, 0x1401, 0x64E6, 0x74C7, 0x44A4, 0x5485,
+    0xA56A, 0xB54B, 0x8528, 0x9509, 0xE5EE, 0xF5CF, 0xC5AC, 0xD58D,
+    0x3653, 0x2672, 0x1611, 0x0630, 0x76D7, 0x66F6, 0x5695, 0x46B4,
+    0xB75B, 0xA77A, 0x9719, 0x8738, 0xF7DF, 0xE7FE, 0xD79D, 0xC7BC,
+    0x48C4, 0x58E5, 0x6886, 0x78A7, 0x0840, 0x1861, 0x2802, 0x3823,
+    0xC9CC, 0xD9ED, 0xE98E, 0xF9AF, 0x8948, 0x9969, 0xA90A, 0xB92B,
+    0x5AF5, 0x4AD4, 0x7AB7, 0x6A96, 0x1A71, 0x0A50, 0x3A33, 0x2A12,
+    0xDBFD, 0xCBDC, 0xFBBF, 0xEB9E, 0x9B79, 0x8B58, 0xBB3B, 0xAB1A,
+    0x6CA6, 0x7C87, 0x4CE4, 0x5CC5, 0x2C22, 0x3C03, 0x0C60, 0x1C41,
+    0xEDAE, 0xFD8F, 0xCDEC, 0xDDCD, 0xAD2A, 0xBD0B, 0x8D68, 0x9D49,
+    0x7E97, 0x6EB6, 0x5ED5, 0x4EF4, 0x3E13, 0x2E32, 0x1E51, 0x0E70,
+    0xFF9F, 0xEFBE, 0xDFDD, 0xCFFC, 0xBF1B, 0xAF3A, 0x9F59, 0x8F78,
+    0x9188, 0x81A9, 0xB1CA, 0xA1EB, 0xD10C, 0xC12D, 0xF14E, 0xE16F,
+    0x1080, 0x00A1, 0x30C2, 0x20E3, 0x5004, 0x4025, 0x7046, 0x6067,
+    0x83B9, 0x9398, 0xA3FB, 0xB3DA, 0xC33D, 0xD31C, 0xE37F, 0xF35E,
+    0x02B1, 0x1290, 0x22F3, 0x32D2, 0x4235, 0x5214, 0x6277, 0x7256,
+    0xB5EA, 0xA5CB, 0x95A8, 0x8589, 0xF56E, 0xE54F, 0xD52C, 0xC50D,
+    0x34E2, 0x24C3, 0x14A0, 0x0481, 0x7466, 0x6447, 0x5424, 0x4405,
+    0xA7DB, 0xB7FA, 0x8799, 0x97B8, 0xE75F, 0xF77E, 0xC71D, 0xD73C,
+    0x26D3, 0x36F2, 0x0691, 0x16B0, 0x6657, 0x7676, 0x4615, 0x5634,
+    0xD94C, 0xC96D, 0xF90E, 0xE92F, 0x99C8, 0x89E9, 0xB98A, 0xA9AB,
+    0x5844, 0x4865, 0x7806, 0x6827, 0x18C0, 0x08E1, 0x3882, 0x28A3,
+    0xCB7D, 0xDB5C, 0xEB3F, 0xFB1E, 0x8BF9, 0x9BD8, 0xABBB, 0xBB9A,
+    0x4A75, 0x5A54, 0x6A37, 0x7A16, 0x0AF1, 0x1AD0, 0x2AB3, 0x3A92,
+    0xFD2E, 0xED0F, 0xDD6C, 0xCD4D, 0xBDAA, 0xAD8B, 0x9DE8, 0x8DC9,
+    0x7C26, 0x6C07, 0x5C64, 0x4C45, 0x3CA2, 0x2C83, 0x1CE0, 0x0CC1,
+    0xEF1F, 0xFF3E, 0xCF5D, 0xDF7C, 0xAF9B, 0xBFBA, 0x8FD9, 0x9FF8,
+    0x6E17, 0x7E36, 0x4E55, 0x5E74, 0x2E93, 0x3EB2, 0x0ED1, 0x1EF0,
+};
+
+/* The step, inlined into the loops below (a call per byte costs as much as the lookup). */
+#define DTHC_CRC_STEP(crc, byte) \
+    ((uint16_t)(((uint16_t)((crc) << 8)) ^ DTHC_CRC_TABLE_READ((((crc) >> 8) ^ (byte)) & 0xFFu)))
+
 uint16_t dthc_crc16_update(uint16_t crc, uint8_t byte)
 {
-    uint16_t x = (uint16_t)(((crc >> 8) ^ byte) & 0xFFu);
-    x = (uint16_t)(x ^ (x >> 4));
-    return (uint16_t)((crc << 8) ^ (x << 12) ^ (x << 5) ^ x);
+    return DTHC_CRC_STEP(crc, byte);
 }
 
 uint16_t dthc_crc16(const uint8_t *data, size_t len)
@@ -24,7 +72,7 @@ uint16_t dthc_crc16(const uint8_t *data, size_t len)
     uint16_t crc = DTHC_CRC_INIT;
     size_t i;
     for (i = 0; i < len; i++) {
-        crc = dthc_crc16_update(crc, data[i]);
+        crc = DTHC_CRC_STEP(crc, data[i]);
     }
     return crc;
 }
@@ -184,25 +232,61 @@ int dthc_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap, si
     return DTHC_OK;
 }
 
+/* --- one-pass frame encoder ---------------------------------------------------------------- */
+
+size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
+                         uint8_t *out, size_t cap)
+{
+    cobs_writer_t w;
+    uint16_t crc = DTHC_CRC_INIT;
+    size_t i;
+    size_t n;
+    if (out == NULL || len > DTHC_MAX_PAYLOAD || (payload == NULL && len != 0)) {
+        return 0;
+    }
+    cw_init(&w, out, cap);
+    crc = DTHC_CRC_STEP(crc, type);
+    cw_byte(&w, type);
+    crc = DTHC_CRC_STEP(crc, seq);
+    cw_byte(&w, seq);
+    for (i = 0; i < len; i++) {
+        /* Read before any write can reach it: the writer is at most 3 bytes past the
+         * bytes consumed (type, seq, the first code byte) within a 254-byte block. */
+        uint8_t b = payload[i];
+        crc = DTHC_CRC_STEP(crc, b);
+        cw_byte(&w, b);
+    }
+    cw_byte(&w, (uint8_t)(crc >> 8)); /* the CRC alone is big-endian */
+    cw_byte(&w, (uint8_t)(crc & 0xFFu));
+    n = cw_finish(&w);
+    if (n == 0 || n >= cap) {
+        return 0;
+    }
+    out[n] = DTHC_DELIMITER;
+    return n + 1;
+}
+
 /* --- field serialisation ------------------------------------------------------------------
- * A sink receives the body bytes (type, seq, payload) one at a time: into a plain buffer
- * (dthc_encode_body) or through the CRC into the COBS writer (dthc_encode). */
+ * A sink receives the body bytes one at a time into a plain buffer, bounds-checked. */
 
 typedef struct {
-    cobs_writer_t *cw; /* NULL: write raw into buf */
     uint8_t *buf;
     size_t cap;
     size_t n;
-    uint16_t crc;
     bool ok;
 } sink_t;
 
+static void sink_init(sink_t *s, uint8_t *buf, size_t cap)
+{
+    s->buf = buf;
+    s->cap = cap;
+    s->n = 0;
+    s->ok = true;
+}
+
 static void put_u8(sink_t *s, uint8_t b)
 {
-    s->crc = dthc_crc16_update(s->crc, b);
-    if (s->cw != NULL) {
-        cw_byte(s->cw, b);
-    } else if (s->n < s->cap) {
+    if (s->n < s->cap) {
         s->buf[s->n] = b;
     } else {
         s->ok = false;
@@ -273,11 +357,10 @@ static bool msg_encodable(const dthc_msg_t *msg)
     return true;
 }
 
-static void put_body(sink_t *s, const dthc_msg_t *msg)
+/* The payload fields of `msg` (no type, no seq). */
+static void put_payload(sink_t *s, const dthc_msg_t *msg)
 {
     size_t i;
-    put_u8(s, msg->type);
-    put_u8(s, msg->seq);
     switch (msg->type) {
     case DTHC_MSG_HELLO: {
         const dthc_hello_t *p = &msg->u.hello;
@@ -445,95 +528,47 @@ size_t dthc_encode_body(const dthc_msg_t *msg, uint8_t *out, size_t cap)
     if (msg == NULL || out == NULL || !msg_encodable(msg)) {
         return 0;
     }
-    s.cw = NULL;
-    s.buf = out;
-    s.cap = cap;
-    s.n = 0;
-    s.crc = DTHC_CRC_INIT;
-    s.ok = true;
-    put_body(&s, msg);
+    sink_init(&s, out, cap);
+    put_u8(&s, msg->type);
+    put_u8(&s, msg->seq);
+    put_payload(&s, msg);
     return s.ok ? s.n : 0;
 }
 
 size_t dthc_encode(const dthc_msg_t *msg, uint8_t *out, size_t cap)
 {
-    cobs_writer_t w;
     sink_t s;
-    size_t n;
-    if (msg == NULL || out == NULL || !msg_encodable(msg)) {
+    if (msg == NULL || out == NULL || !msg_encodable(msg) || cap <= DTHC_TX_PAYLOAD_OFFSET) {
         return 0;
     }
-    cw_init(&w, out, cap);
-    s.cw = &w;
-    s.buf = NULL;
-    s.cap = 0;
-    s.n = 0;
-    s.crc = DTHC_CRC_INIT;
-    s.ok = true;
-    put_body(&s, msg);
-    if (!s.ok || s.n + 2 > DTHC_MAX_FRAME) {
+    /* Pack the payload where dthc_encode_frame may read it in place: no body buffer. A
+     * payload that does not fit there cannot fit as a wire frame either (6 bytes more). */
+    sink_init(&s, out + DTHC_TX_PAYLOAD_OFFSET, cap - DTHC_TX_PAYLOAD_OFFSET);
+    put_payload(&s, msg);
+    if (!s.ok) {
         return 0;
     }
-    cw_byte(&w, (uint8_t)(s.crc >> 8)); /* the CRC alone is big-endian */
-    cw_byte(&w, (uint8_t)(s.crc & 0xFFu));
-    n = cw_finish(&w);
-    if (n == 0 || n >= cap) {
-        return 0;
-    }
-    out[n] = DTHC_DELIMITER;
-    return n + 1;
+    return dthc_encode_frame(msg->type, msg->seq, out + DTHC_TX_PAYLOAD_OFFSET, s.n, out, cap);
 }
 
 /* --- field parsing -------------------------------------------------------------------------- */
 
-static uint16_t get_u16(const uint8_t *p)
-{
-    return (uint16_t)((uint16_t)p[0] | (uint16_t)((uint16_t)p[1] << 8));
-}
-
-static uint32_t get_u32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16)
-           | ((uint32_t)p[3] << 24);
-}
-
-static int32_t get_i32(const uint8_t *p)
-{
-    uint32_t u = get_u32(p);
-    /* Two's complement without implementation-defined unsigned-to-signed conversion. */
-    if (u <= 0x7FFFFFFFu) {
-        return (int32_t)u;
-    }
-    return -(int32_t)(~u) - 1;
-}
-
-static uint64_t get_u64(const uint8_t *p)
-{
-    return (uint64_t)get_u32(p) | ((uint64_t)get_u32(p + 4) << 32);
-}
-
 static float get_f32(const uint8_t *p)
 {
-    uint32_t bits = get_u32(p);
+    uint32_t bits = dthc_get_u32(p);
     float f;
     memcpy(&f, &bits, sizeof f);
     return f;
 }
 
-/* Type and length check, then unpack. `raw` holds type, seq, payload (len bytes, CRC
- * already checked and excluded). */
-static int parse_body(const uint8_t *raw, size_t len, dthc_msg_t *out)
+/* Type and exact payload length (PROTOCOL.md section 2, the last two checks). */
+static int check_payload(uint8_t type, size_t payload)
 {
-    const uint8_t *p = raw + 2;
-    size_t payload = len - 2;
-    int size = dthc_payload_size(raw[0]);
-    size_t i;
-    dthc_msg_t m;
-
+    int size = dthc_payload_size(type);
     if (size < 0) {
         return DTHC_ERR_UNKNOWN_TYPE;
     }
-    if (raw[0] == DTHC_MSG_SAMPLES) {
+    if (type == DTHC_MSG_SAMPLES) {
         if (payload < DTHC_SAMPLES_HEADER_SIZE || ((payload - DTHC_SAMPLES_HEADER_SIZE) & 1u)
             || (payload - DTHC_SAMPLES_HEADER_SIZE) / 2 > DTHC_MAX_SAMPLES) {
             return DTHC_ERR_BAD_LENGTH;
@@ -541,168 +576,189 @@ static int parse_body(const uint8_t *raw, size_t len, dthc_msg_t *out)
     } else if (payload != (size_t)size) {
         return DTHC_ERR_BAD_LENGTH;
     }
+    return DTHC_OK;
+}
 
-    memset(&m, 0, sizeof m);
-    m.type = raw[0];
-    m.seq = raw[1];
-    switch (m.type) {
+/* Checked first, then unpacked straight into *out (no message-sized local: on AVR the
+ * stack is as scarce as the static RAM). */
+int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out)
+{
+    const uint8_t *p;
+    size_t payload;
+    size_t i;
+    dthc_msg_t *m = out;
+    int rc;
+
+    if (frame == NULL || out == NULL || (frame->payload == NULL && frame->len != 0)) {
+        return DTHC_ERR_BAD_LENGTH;
+    }
+    p = frame->payload;
+    payload = frame->len;
+    rc = check_payload(frame->type, payload);
+    if (rc != DTHC_OK) {
+        return rc;
+    }
+
+    memset(m, 0, sizeof *m);
+    m->type = frame->type;
+    m->seq = frame->seq;
+    switch (m->type) {
     case DTHC_MSG_HELLO:
-        m.u.hello.proto_major = p[0];
-        m.u.hello.proto_minor = p[1];
-        m.u.hello.host_nonce = get_u32(p + 2);
+        m->u.hello.proto_major = p[0];
+        m->u.hello.proto_minor = p[1];
+        m->u.hello.host_nonce = dthc_get_u32(p + 2);
         break;
     case DTHC_MSG_HEARTBEAT:
     case DTHC_MSG_Z_STOP:
     case DTHC_MSG_CLOCK_QUERY:
         break;
     case DTHC_MSG_SET_LEASE:
-        m.u.set_lease.lease_ms = get_u16(p);
+        m->u.set_lease.lease_ms = dthc_get_u16(p);
         break;
     case DTHC_MSG_TORCH:
-        m.u.torch.on = p[0] != 0; /* any non-zero byte is true */
+        m->u.torch.on = p[0] != 0; /* any non-zero byte is true */
         break;
     case DTHC_MSG_OHMIC_SENSE:
-        m.u.ohmic_sense.on = p[0] != 0;
+        m->u.ohmic_sense.on = p[0] != 0;
         break;
     case DTHC_MSG_Z_MOVE:
-        m.u.z_move.target_um = get_i32(p);
-        m.u.z_move.feed_um_s = get_u32(p + 4);
+        m->u.z_move.target_um = dthc_get_i32(p);
+        m->u.z_move.feed_um_s = dthc_get_u32(p + 4);
         break;
     case DTHC_MSG_Z_PROBE:
-        m.u.z_probe.feed_um_s = get_u32(p);
-        m.u.z_probe.max_travel_um = get_u32(p + 4);
-        m.u.z_probe.sensors = get_u16(p + 8);
+        m->u.z_probe.feed_um_s = dthc_get_u32(p);
+        m->u.z_probe.max_travel_um = dthc_get_u32(p + 4);
+        m->u.z_probe.sensors = dthc_get_u16(p + 8);
         break;
     case DTHC_MSG_Z_VELOCITY:
-        m.u.z_velocity.stream_seq = get_u16(p);
-        m.u.z_velocity.velocity_um_s = get_i32(p + 2);
-        m.u.z_velocity.expiry_ms = get_u16(p + 6);
+        m->u.z_velocity.stream_seq = dthc_get_u16(p);
+        m->u.z_velocity.velocity_um_s = dthc_get_i32(p + 2);
+        m->u.z_velocity.expiry_ms = dthc_get_u16(p + 6);
         break;
     case DTHC_MSG_SET_CURRENT:
-        m.u.set_current.current_da = get_u16(p);
+        m->u.set_current.current_da = dthc_get_u16(p);
         break;
     case DTHC_MSG_CONFIGURE: {
-        dthc_configure_t *c = &m.u.configure;
-        c->sample_rate_hz = get_u16(p);
+        dthc_configure_t *c = &m->u.configure;
+        c->sample_rate_hz = dthc_get_u16(p);
         c->batch_size = p[2];
         c->filter_kind = p[3];
-        c->filter_param = get_u16(p + 4);
-        c->arc_lost_ms = get_u16(p + 6);
-        c->cal_offset = get_i32(p + 8);
+        c->filter_param = dthc_get_u16(p + 4);
+        c->arc_lost_ms = dthc_get_u16(p + 6);
+        c->cal_offset = dthc_get_i32(p + 8);
         c->cal_scale = get_f32(p + 12);
         break;
     }
     case DTHC_MSG_QUERY:
-        m.u.query.what = p[0];
+        m->u.query.what = p[0];
         break;
     case DTHC_MSG_FAULT_RESET:
-        m.u.fault_reset.mask = get_u16(p);
+        m->u.fault_reset.mask = dthc_get_u16(p);
         break;
     case DTHC_MSG_ACK:
-        m.u.ack.boot_id = get_u32(p);
+        m->u.ack.boot_id = dthc_get_u32(p);
         break;
     case DTHC_MSG_NAK:
-        m.u.nak.boot_id = get_u32(p);
-        m.u.nak.code = p[4];
-        m.u.nak.detail = p[5];
+        m->u.nak.boot_id = dthc_get_u32(p);
+        m->u.nak.code = p[4];
+        m->u.nak.detail = p[5];
         break;
     case DTHC_MSG_HELLO_INFO: {
-        dthc_hello_info_t *h = &m.u.hello_info;
+        dthc_hello_info_t *h = &m->u.hello_info;
         h->proto_major = p[0];
         h->proto_minor = p[1];
         h->fw_major = p[2];
         h->fw_minor = p[3];
         h->fw_patch = p[4];
         h->reset_reason = p[5];
-        h->boot_id = get_u32(p + 6);
+        h->boot_id = dthc_get_u32(p + 6);
         for (i = 0; i < DTHC_SERIAL_LEN && p[10 + i] != 0; i++) {
             h->serial[i] = (char)p[10 + i];
         }
         h->serial[i] = '\0';
-        h->sample_rate_hz = get_u16(p + 26);
+        h->sample_rate_hz = dthc_get_u16(p + 26);
         h->batch_size = p[28];
-        h->capabilities = get_u32(p + 29);
-        h->z_min_um = get_i32(p + 33);
-        h->z_max_um = get_i32(p + 37);
-        h->max_frame = get_u16(p + 41);
-        h->lease_ms = get_u16(p + 43);
+        h->capabilities = dthc_get_u32(p + 29);
+        h->z_min_um = dthc_get_i32(p + 33);
+        h->z_max_um = dthc_get_i32(p + 37);
+        h->max_frame = dthc_get_u16(p + 41);
+        h->lease_ms = dthc_get_u16(p + 43);
         break;
     }
     case DTHC_MSG_SAMPLES: {
-        dthc_samples_t *sm = &m.u.samples;
-        sm->stream_seq = get_u16(p);
-        sm->t0_us = get_u32(p + 2);
-        sm->period_us = get_u16(p + 6);
-        sm->z_um = get_i32(p + 8);
-        sm->inputs = get_u16(p + 12);
-        sm->zvel_seq = get_u16(p + 14);
-        sm->xy_speed_dmm_s = get_u16(p + 16);
+        dthc_samples_t *sm = &m->u.samples;
+        sm->stream_seq = dthc_get_u16(p);
+        sm->t0_us = dthc_get_u32(p + 2);
+        sm->period_us = dthc_get_u16(p + 6);
+        sm->z_um = dthc_get_i32(p + 8);
+        sm->inputs = dthc_get_u16(p + 12);
+        sm->zvel_seq = dthc_get_u16(p + 14);
+        sm->xy_speed_dmm_s = dthc_get_u16(p + 16);
         sm->status = p[18];
         sm->n_samples = (uint8_t)((payload - DTHC_SAMPLES_HEADER_SIZE) / 2);
         for (i = 0; i < sm->n_samples; i++) {
-            sm->samples_cv[i] = get_u16(p + DTHC_SAMPLES_HEADER_SIZE + 2 * i);
+            sm->samples_cv[i] = dthc_get_u16(p + DTHC_SAMPLES_HEADER_SIZE + 2 * i);
         }
         break;
     }
     case DTHC_MSG_EVENT: {
-        dthc_event_t *e = &m.u.event;
-        e->counter = get_u32(p);
-        e->t_us = get_u32(p + 4);
+        dthc_event_t *e = &m->u.event;
+        e->counter = dthc_get_u32(p);
+        e->t_us = dthc_get_u32(p + 4);
         e->input = p[8];
         e->level = p[9];
-        e->inputs = get_u16(p + 10);
-        e->z_um = get_i32(p + 12);
+        e->inputs = dthc_get_u16(p + 10);
+        e->z_um = dthc_get_i32(p + 12);
         break;
     }
     case DTHC_MSG_FAULT: {
-        dthc_fault_t *f = &m.u.fault;
-        f->counter = get_u32(p);
-        f->t_us = get_u32(p + 4);
+        dthc_fault_t *f = &m->u.fault;
+        f->counter = dthc_get_u32(p);
+        f->t_us = dthc_get_u32(p + 4);
         f->code = p[8];
         f->detail = p[9];
-        f->faults = get_u16(p + 10);
-        f->z_um = get_i32(p + 12);
+        f->faults = dthc_get_u16(p + 10);
+        f->z_um = dthc_get_i32(p + 12);
         break;
     }
     case DTHC_MSG_MOTION_DONE:
-        m.u.motion_done.result = p[0];
-        m.u.motion_done.z_um = get_i32(p + 1);
-        m.u.motion_done.t_us = get_u32(p + 5);
+        m->u.motion_done.result = p[0];
+        m->u.motion_done.z_um = dthc_get_i32(p + 1);
+        m->u.motion_done.t_us = dthc_get_u32(p + 5);
         break;
     case DTHC_MSG_PROBE_RESULT: {
-        dthc_probe_result_t *r = &m.u.probe_result;
+        dthc_probe_result_t *r = &m->u.probe_result;
         r->result = p[0];
-        r->sensor = get_u16(p + 1);
-        r->contact_z_um = get_i32(p + 3);
-        r->stop_z_um = get_i32(p + 7);
-        r->t_us = get_u32(p + 11);
+        r->sensor = dthc_get_u16(p + 1);
+        r->contact_z_um = dthc_get_i32(p + 3);
+        r->stop_z_um = dthc_get_i32(p + 7);
+        r->t_us = dthc_get_u32(p + 11);
         break;
     }
     case DTHC_MSG_STATUS: {
-        dthc_status_t *st = &m.u.status;
-        st->boot_id = get_u32(p);
-        st->t_us = get_u32(p + 4);
-        st->faults = get_u16(p + 8);
-        st->inputs = get_u16(p + 10);
+        dthc_status_t *st = &m->u.status;
+        st->boot_id = dthc_get_u32(p);
+        st->t_us = dthc_get_u32(p + 4);
+        st->faults = dthc_get_u16(p + 8);
+        st->inputs = dthc_get_u16(p + 10);
         st->status = p[12];
-        st->lease_ms = get_u16(p + 13);
-        st->event_counter = get_u32(p + 15);
-        st->sample_seq = get_u16(p + 19);
-        st->zvel_seq = get_u16(p + 21);
-        st->z_um = get_i32(p + 23);
-        st->current_da = get_u16(p + 27);
-        st->rx_crc_errors = get_u16(p + 29);
-        st->rx_framing_errors = get_u16(p + 31);
-        st->rx_duplicates = get_u16(p + 33);
+        st->lease_ms = dthc_get_u16(p + 13);
+        st->event_counter = dthc_get_u32(p + 15);
+        st->sample_seq = dthc_get_u16(p + 19);
+        st->zvel_seq = dthc_get_u16(p + 21);
+        st->z_um = dthc_get_i32(p + 23);
+        st->current_da = dthc_get_u16(p + 27);
+        st->rx_crc_errors = dthc_get_u16(p + 29);
+        st->rx_framing_errors = dthc_get_u16(p + 31);
+        st->rx_duplicates = dthc_get_u16(p + 33);
         break;
     }
     case DTHC_MSG_CLOCK:
-        m.u.clock.t_us = get_u64(p);
+        m->u.clock.t_us = dthc_get_u64(p);
         break;
     default:
         return DTHC_ERR_UNKNOWN_TYPE; /* unreachable: dthc_payload_size() knows the types */
     }
-    memcpy(out, &m, sizeof m);
     return DTHC_OK;
 }
 
@@ -717,7 +773,14 @@ int dthc_decode_body(const uint8_t *raw, size_t len, dthc_msg_t *out)
     if (dthc_crc16(raw, len) != 0) {
         return DTHC_ERR_CRC;
     }
-    return parse_body(raw, len - 2, out);
+    {
+        dthc_frame_t f;
+        f.type = raw[0];
+        f.seq = raw[1];
+        f.payload = raw + 2;
+        f.len = (uint8_t)(len - 4);
+        return dthc_frame_to_msg(&f, out);
+    }
 }
 
 /* --- streaming receiver ------------------------------------------------------------------ */
@@ -742,12 +805,14 @@ static void rx_push(dthc_rx_t *rx, uint8_t b)
 {
     /* dec_len < enc_len <= DTHC_MAX_ENCODED_FRAME: always inside buf. */
     rx->buf[rx->dec_len++] = b;
-    rx->crc = dthc_crc16_update(rx->crc, b);
+    rx->crc = DTHC_CRC_STEP(rx->crc, b);
 }
 
 /* A frame ended at a delimiter: check it in the order of PROTOCOL.md section 2 (valid
- * COBS, 4 <= decoded length <= DTHC_MAX_FRAME, CRC, known type, payload length). */
-static int rx_end_frame(dthc_rx_t *rx, dthc_msg_t *out)
+ * COBS, 4 <= decoded length <= DTHC_MAX_FRAME, CRC, known type, payload length). The frame
+ * stays in buf; dthc_rx_reset only rewinds the counts, so the view stays valid until the
+ * next byte is fed. */
+static int rx_end_frame(dthc_rx_t *rx, dthc_frame_t *frame)
 {
     int rc;
     if (rx->block_left != 0) {
@@ -764,12 +829,19 @@ static int rx_end_frame(dthc_rx_t *rx, dthc_msg_t *out)
         rc = DTHC_ERR_CRC;
         rx->crc_errors++;
     } else {
-        rc = parse_body(rx->buf, (size_t)rx->dec_len - 2u, out);
+        size_t len = (size_t)rx->dec_len - 4u;
+        rc = check_payload(rx->buf[0], len);
+        frame->type = rx->buf[0];
+        frame->seq = rx->buf[1];
+        frame->payload = rx->buf + 2;
+        frame->len = (uint8_t)len; /* dec_len <= 256: len <= 252 */
         if (rc == DTHC_OK) {
             rx->frames_ok++;
             dthc_rx_reset(rx);
             return 1;
         }
+        rx->reject_type = frame->type;
+        rx->reject_seq = frame->seq;
         if (rc == DTHC_ERR_UNKNOWN_TYPE) {
             rx->unknown_type++;
         } else {
@@ -781,7 +853,7 @@ static int rx_end_frame(dthc_rx_t *rx, dthc_msg_t *out)
     return rc;
 }
 
-int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out)
+int dthc_rx_feed(dthc_rx_t *rx, uint8_t byte, dthc_frame_t *frame)
 {
     rx->bytes_in++;
     if (byte == DTHC_DELIMITER) {
@@ -794,7 +866,7 @@ int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out)
         if (rx->enc_len == 0) {
             return 0; /* empty frame: idle or resynchronising delimiter */
         }
-        return rx_end_frame(rx, out);
+        return rx_end_frame(rx, frame);
     }
     if (rx->discarding) {
         rx->dropped_bytes++;
@@ -822,4 +894,16 @@ int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out)
         rx->block_left--;
     }
     return 0;
+}
+
+int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out)
+{
+    dthc_frame_t frame;
+    int rc = dthc_rx_feed(rx, byte, &frame);
+    if (rc == 1) {
+        /* Cannot fail: dthc_rx_feed checked type and length already. */
+        rc = dthc_frame_to_msg(&frame, out);
+        return rc == DTHC_OK ? 1 : rc;
+    }
+    return rc;
 }

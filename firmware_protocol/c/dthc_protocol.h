@@ -5,7 +5,8 @@
  * firmware_protocol/vectors/frames.json (checked by tests/firmware_protocol/test_c_codec.py).
  *
  * Made for microcontrollers: no malloc, no stdio, no floating-point arithmetic (the one f32
- * field is moved as its 4 bytes), only <stdint.h> <stddef.h> <string.h> <stdbool.h>.
+ * field is moved as its 4 bytes), only <stdint.h> <stddef.h> <string.h> <stdbool.h> (and
+ * <avr/pgmspace.h> on AVR, for the CRC table in flash).
  * Every multi-byte field is read and written with explicit byte shifts, so the code is
  * independent of the host's byte order and alignment. The only assumption is that `float`
  * is IEEE-754 binary32 (checked at compile time for its size).
@@ -13,10 +14,30 @@
  *   on the wire:   COBS( type | seq | payload | crc_hi | crc_lo ) | 0x00
  *   decoded frame: type u8 | seq u8 | payload (0..252 bytes) | crc u16 big-endian
  *
- * Sending:   dthc_msg_t m = {DTHC_MSG_ACK, seq, {0}}; m.u.ack.boot_id = id;
- *            n = dthc_encode(&m, buf, sizeof buf);           (buf of DTHC_MAX_WIRE_FRAME)
- * Receiving: dthc_rx_init(&rx); then for every received byte (e.g. in the UART ISR):
- *            if (dthc_rx_feed_byte(&rx, byte, &m) == 1) handle(&m);
+ * Two ways to use it:
+ *
+ * 1. Frame views (for small MCUs: no dthc_msg_t, which is about 254 bytes on AVR).
+ *    Receiving: the receiver COBS-decodes in place into rx.buf and hands out a view:
+ *        dthc_frame_t f;
+ *        int rc = dthc_rx_feed(&rx, byte, &f);
+ *        if (rc == 1) handle(f.type, f.seq, f.payload, f.len);  read fields with dthc_get_*
+ *        else if (rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) nak(f.seq, ...);
+ *    f.payload points into rx.buf: use it before feeding the next byte (feed from the main
+ *    loop out of a ring buffer the UART ISR fills, not from the ISR itself).
+ *    Sending: build the payload with dthc_put_* straight into the transmit buffer at
+ *    DTHC_TX_PAYLOAD_OFFSET and encode in place, one pass, CRC computed on the way:
+ *        uint8_t *p = tx + DTHC_TX_PAYLOAD_OFFSET;  (tx of DTHC_MAX_WIRE_FRAME bytes)
+ *        dthc_put_u32(p, boot_id);
+ *        n = dthc_encode_frame(DTHC_MSG_ACK, seq, p, 4, tx, sizeof tx);
+ *
+ * 2. Messages (convenient on a host or a big MCU):
+ *    Sending:   dthc_msg_t m = {DTHC_MSG_ACK, seq, {0}}; m.u.ack.boot_id = id;
+ *               n = dthc_encode(&m, buf, sizeof buf);        (buf of DTHC_MAX_WIRE_FRAME)
+ *    Receiving: dthc_rx_init(&rx); then for every received byte:
+ *               if (dthc_rx_feed_byte(&rx, byte, &m) == 1) handle(&m);
+ *
+ * The CRC is table-driven (512 bytes; in flash on AVR via PROGMEM) because the bitwise
+ * form cost about 100 us per STATUS frame at 16 MHz, against a 1 ms reply budget.
  *
  * Not thread-safe per object: one dthc_rx_t per link, fed from one context.
  */
@@ -46,6 +67,11 @@ extern "C" {
 #define DTHC_MAX_WIRE_FRAME (DTHC_MAX_ENCODED_FRAME + 1)
 /* The receive buffer (PROTOCOL.md section 2: "never holds more than 259 bytes"). */
 #define DTHC_RX_BUF_SIZE DTHC_MAX_WIRE_FRAME
+
+/* dthc_encode_frame may read its payload from its own output buffer when the payload
+ * starts at least this many bytes into it (type, seq and the first COBS code byte go
+ * first; COBS never writes ahead of the byte it reads): encoding in place, no copy. */
+#define DTHC_TX_PAYLOAD_OFFSET 3
 
 /* CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, not reflected, xorout 0x0000. */
 #define DTHC_CRC_POLY 0x1021
@@ -361,12 +387,76 @@ typedef struct {
     } u;
 } dthc_msg_t;
 
+/* --- little-endian field helpers --------------------------------------------------------
+ * Read and write payload fields in place (PROTOCOL.md section 1: little-endian), with byte
+ * shifts, so they work on any host byte order and any alignment. */
+
+static inline void dthc_put_u16(uint8_t *p, uint16_t v)
+{
+    p[0] = (uint8_t)(v & 0xFFu);
+    p[1] = (uint8_t)(v >> 8);
+}
+
+static inline void dthc_put_u32(uint8_t *p, uint32_t v)
+{
+    p[0] = (uint8_t)(v & 0xFFu);
+    p[1] = (uint8_t)((v >> 8) & 0xFFu);
+    p[2] = (uint8_t)((v >> 16) & 0xFFu);
+    p[3] = (uint8_t)(v >> 24);
+}
+
+static inline void dthc_put_i32(uint8_t *p, int32_t v)
+{
+    dthc_put_u32(p, (uint32_t)v); /* modulo 2^32: two's complement bytes on every host */
+}
+
+static inline void dthc_put_u64(uint8_t *p, uint64_t v)
+{
+    dthc_put_u32(p, (uint32_t)(v & 0xFFFFFFFFu));
+    dthc_put_u32(p + 4, (uint32_t)(v >> 32));
+}
+
+static inline uint16_t dthc_get_u16(const uint8_t *p)
+{
+    return (uint16_t)((uint16_t)p[0] | (uint16_t)((uint16_t)p[1] << 8));
+}
+
+static inline uint32_t dthc_get_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16)
+           | ((uint32_t)p[3] << 24);
+}
+
+static inline int32_t dthc_get_i32(const uint8_t *p)
+{
+    uint32_t u = dthc_get_u32(p);
+    /* Two's complement without implementation-defined unsigned-to-signed conversion. */
+    if (u <= 0x7FFFFFFFu) {
+        return (int32_t)u;
+    }
+    return -(int32_t)(~u) - 1;
+}
+
+static inline uint64_t dthc_get_u64(const uint8_t *p)
+{
+    return (uint64_t)dthc_get_u32(p) | ((uint64_t)dthc_get_u32(p + 4) << 32);
+}
+
 /* --- functions -------------------------------------------------------------------------- */
 
 /* CRC-16/CCITT-FALSE of `len` bytes. dthc_crc16_update continues a running CRC (start
  * with DTHC_CRC_INIT). The CRC of a whole decoded frame, CRC bytes included, is 0. */
 uint16_t dthc_crc16(const uint8_t *data, size_t len);
 uint16_t dthc_crc16_update(uint16_t crc, uint8_t byte);
+
+/* One pass, no body buffer: the complete wire frame
+ * COBS(type | seq | payload | crc_hi | crc_lo) | 0x00 into `out`, the CRC computed as the
+ * bytes go. `payload` may be NULL when len is 0, and may lie inside `out` at
+ * DTHC_TX_PAYLOAD_OFFSET or later (in-place encoding). Returns the wire length, or 0 if
+ * len > DTHC_MAX_PAYLOAD or it does not fit `cap` (DTHC_MAX_WIRE_FRAME always fits).
+ * Type and length are not checked against the message table: a test can send anything. */
+size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
+                         uint8_t *out, size_t cap);
 
 /* Payload size of a message type: the fixed size, for SAMPLES the fixed part
  * (DTHC_SAMPLES_HEADER_SIZE, plus 2 per sample), or -1 for an unknown type. */
@@ -387,7 +477,9 @@ int dthc_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap, si
 size_t dthc_encode_body(const dthc_msg_t *msg, uint8_t *out, size_t cap);
 
 /* The complete wire frame of `msg`: COBS(body | crc_hi | crc_lo) | 0x00. Returns its length,
- * or 0 on error (as dthc_encode_body). A buffer of DTHC_MAX_WIRE_FRAME bytes always fits. */
+ * or 0 on error (as dthc_encode_body). A buffer of DTHC_MAX_WIRE_FRAME bytes always fits.
+ * The payload is packed into `out` itself and encoded in place (dthc_encode_frame), so it
+ * needs no stack buffer. */
 size_t dthc_encode(const dthc_msg_t *msg, uint8_t *out, size_t cap);
 
 /* Decode one decoded frame (type, seq, payload, crc; COBS already removed). Checks, in
@@ -395,9 +487,22 @@ size_t dthc_encode(const dthc_msg_t *msg, uint8_t *out, size_t cap);
  * payload length. Returns 0 and fills *out, or a negative dthc_err_t (*out untouched). */
 int dthc_decode_body(const uint8_t *raw, size_t len, dthc_msg_t *out);
 
+/* A received frame, decoded in place: the header and a view of the payload. */
+typedef struct {
+    uint8_t type;
+    uint8_t seq;
+    const uint8_t *payload; /* points into the receiver's buffer: valid until the next feed */
+    uint8_t len;            /* payload bytes (0..DTHC_MAX_PAYLOAD) */
+} dthc_frame_t;
+
+/* Unpack a frame's payload into a message (the old, RAM-hungry way: a dthc_msg_t is about
+ * 254 bytes on AVR). Checks type and exact payload length first. Returns 0 and fills *out,
+ * or DTHC_ERR_UNKNOWN_TYPE / DTHC_ERR_BAD_LENGTH (*out untouched). */
+int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out);
+
 /* Streaming receiver (PROTOCOL.md section 2, "Receiving and resynchronising").
- * COBS decoding and the CRC run as the bytes arrive, so a byte costs O(1); at the
- * delimiter only the payload fields are unpacked. The counters mean what the Python
+ * COBS decoding and the CRC run as the bytes arrive, into buf, so a byte costs O(1) and
+ * a completed frame is handed out as a view of buf (dthc_rx_feed). The counters mean what the Python
  * firmware_protocol.stream.DecoderStats counters mean:
  *   frames_ok       valid messages delivered
  *   crc_errors      frames with a bad CRC
@@ -417,6 +522,11 @@ typedef struct {
     uint8_t block_left;            /* data bytes left in the current COBS block */
     bool zero_pending;             /* the current block ends in an implied 0x00 */
     bool discarding;               /* after an over-long run: drop up to the next 0x00 */
+    /* type and seq of the last frame rejected for an unknown type or a bad payload length
+     * (its CRC was valid, so its seq can be NAKed; PROTOCOL.md section 7). Kept by
+     * dthc_rx_reset, cleared by dthc_rx_init. For callers of dthc_rx_feed_byte. */
+    uint8_t reject_type;
+    uint8_t reject_seq;
     uint32_t bytes_in;
     uint32_t frames_ok;
     uint32_t crc_errors;
@@ -432,9 +542,19 @@ void dthc_rx_init(dthc_rx_t *rx);
 /* Forget a partial frame (after reopening the link); keeps the counters. */
 void dthc_rx_reset(dthc_rx_t *rx);
 
-/* Feed one received byte. Returns 1 when it completed a valid message (written to *out),
- * 0 when more bytes are needed (or on an idle delimiter), or a negative dthc_err_t when a
- * frame was dropped (it is counted; *out is untouched). */
+/* Feed one received byte. Returns 1 with *frame filled when a frame with valid COBS,
+ * length and CRC, a known type and the exact payload length completed; 0 when more bytes
+ * are needed (or on an idle delimiter); a negative dthc_err_t when a frame was dropped (it
+ * is counted). For DTHC_ERR_UNKNOWN_TYPE and DTHC_ERR_BAD_LENGTH *frame is ALSO filled
+ * (type, seq, payload, len), so a firmware can NAK it with the frame's seq (PROTOCOL.md
+ * section 7); for the other errors *frame is untouched. Nothing is copied: frame->payload
+ * points into rx->buf and is valid until the next call. O(1) per byte. */
+int dthc_rx_feed(dthc_rx_t *rx, uint8_t byte, dthc_frame_t *frame);
+
+/* The old API: dthc_rx_feed, then dthc_frame_to_msg. Returns 1 when it completed a valid
+ * message (written to *out), 0 when more bytes are needed (or on an idle delimiter), or a
+ * negative dthc_err_t when a frame was dropped (it is counted; *out is untouched; for
+ * UNKNOWN_TYPE and BAD_LENGTH rx->reject_type and rx->reject_seq say which frame). */
 int dthc_rx_feed_byte(dthc_rx_t *rx, uint8_t byte, dthc_msg_t *out);
 
 #ifdef __cplusplus
