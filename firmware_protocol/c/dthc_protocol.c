@@ -16,14 +16,16 @@ typedef char dthc_float_must_be_32_bits[(sizeof(float) == 4) ? 1 : -1];
 
 #ifdef __AVR__
 #include <avr/pgmspace.h>
-#define DTHC_CRC_TABLE_ATTR PROGMEM
+#define DTHC_FLASH_ATTR PROGMEM
 #define DTHC_CRC_TABLE_READ(i) ((uint16_t)pgm_read_word(&dthc_crc_table[(i)]))
+#define DTHC_FLASH_READ_BYTE(p) ((uint8_t)pgm_read_byte(p))
 #else
-#define DTHC_CRC_TABLE_ATTR
+#define DTHC_FLASH_ATTR
 #define DTHC_CRC_TABLE_READ(i) (dthc_crc_table[(i)])
+#define DTHC_FLASH_READ_BYTE(p) (*(p))
 #endif
 
-static const uint16_t dthc_crc_table[256] DTHC_CRC_TABLE_ATTR = {
+static const uint16_t dthc_crc_table[256] DTHC_FLASH_ATTR = {
     0x0000, 0x1021, 0x2042, 0x3063, 0x4084, 0x50A5, 0x60C6, 0x70E7,
     0x8108, 0x9129, 0xA14A, 0xB16B, 0xC18C, 0xD1AD, 0xE1CE, 0xF1EF,
     0x1231, 0x0210, 0x3273, 0x2252, 0x52B5, 0x4294, 0x72F7, 0x62D6,
@@ -79,35 +81,48 @@ uint16_t dthc_crc16(const uint8_t *data, size_t len)
 
 /* --- message table ------------------------------------------------------------------------ */
 
+/* Payload sizes by type, host-to-board types from 0x01, board-to-host from 0x80; 0xFF for a
+ * gap. Explicit tables in flash, not a switch: gcc turns such a switch into a 137-byte lookup
+ * table that avr-gcc puts in RAM. */
+#define DTHC_NO_TYPE 0xFFu
+static const uint8_t dthc_host_sizes[DTHC_MSG_FAULT_RESET] DTHC_FLASH_ATTR = {
+    6,  /* 0x01 HELLO */
+    0,  /* 0x02 HEARTBEAT */
+    2,  /* 0x03 SET_LEASE */
+    1,  /* 0x04 TORCH */
+    1,  /* 0x05 OHMIC_SENSE */
+    8,  /* 0x06 Z_MOVE */
+    10, /* 0x07 Z_PROBE */
+    8,  /* 0x08 Z_VELOCITY */
+    0,  /* 0x09 Z_STOP */
+    2,  /* 0x0A SET_CURRENT */
+    16, /* 0x0B CONFIGURE */
+    1,  /* 0x0C QUERY */
+    0,  /* 0x0D CLOCK_QUERY */
+    2,  /* 0x0E FAULT_RESET */
+};
+static const uint8_t dthc_board_sizes[DTHC_MSG_CLOCK - DTHC_MSG_ACK + 1] DTHC_FLASH_ATTR = {
+    4,                        /* 0x80 ACK */
+    6,                        /* 0x81 NAK */
+    45,                       /* 0x82 HELLO_INFO */
+    DTHC_SAMPLES_HEADER_SIZE, /* 0x83 SAMPLES: the fixed part */
+    16,                       /* 0x84 EVENT */
+    16,                       /* 0x85 FAULT */
+    9,                        /* 0x86 MOTION_DONE */
+    15,                       /* 0x87 PROBE_RESULT */
+    35,                       /* 0x88 STATUS */
+    8,                        /* 0x89 CLOCK */
+};
+
 int dthc_payload_size(uint8_t type)
 {
-    switch (type) {
-    case DTHC_MSG_HELLO: return 6;
-    case DTHC_MSG_HEARTBEAT: return 0;
-    case DTHC_MSG_SET_LEASE: return 2;
-    case DTHC_MSG_TORCH: return 1;
-    case DTHC_MSG_OHMIC_SENSE: return 1;
-    case DTHC_MSG_Z_MOVE: return 8;
-    case DTHC_MSG_Z_PROBE: return 10;
-    case DTHC_MSG_Z_VELOCITY: return 8;
-    case DTHC_MSG_Z_STOP: return 0;
-    case DTHC_MSG_SET_CURRENT: return 2;
-    case DTHC_MSG_CONFIGURE: return 16;
-    case DTHC_MSG_QUERY: return 1;
-    case DTHC_MSG_CLOCK_QUERY: return 0;
-    case DTHC_MSG_FAULT_RESET: return 2;
-    case DTHC_MSG_ACK: return 4;
-    case DTHC_MSG_NAK: return 6;
-    case DTHC_MSG_HELLO_INFO: return 45;
-    case DTHC_MSG_SAMPLES: return DTHC_SAMPLES_HEADER_SIZE;
-    case DTHC_MSG_EVENT: return 16;
-    case DTHC_MSG_FAULT: return 16;
-    case DTHC_MSG_MOTION_DONE: return 9;
-    case DTHC_MSG_PROBE_RESULT: return 15;
-    case DTHC_MSG_STATUS: return 35;
-    case DTHC_MSG_CLOCK: return 8;
-    default: return -1;
+    uint8_t size = DTHC_NO_TYPE;
+    if (type >= DTHC_MSG_HELLO && type <= DTHC_MSG_FAULT_RESET) {
+        size = DTHC_FLASH_READ_BYTE(&dthc_host_sizes[type - DTHC_MSG_HELLO]);
+    } else if (type >= DTHC_MSG_ACK && type <= DTHC_MSG_CLOCK) {
+        size = DTHC_FLASH_READ_BYTE(&dthc_board_sizes[type - DTHC_MSG_ACK]);
     }
+    return size == DTHC_NO_TYPE ? -1 : (int)size;
 }
 
 /* --- COBS encoder ------------------------------------------------------------------------

@@ -16,6 +16,27 @@
  *   E <hex>   "COBS <hex>" (dthc_cobs_encode), or "ERR <code>".
  *   D <hex>   "RAW <hex>" (dthc_cobs_decode), or "ERR <code>".
  *   K         every constant of dthc_protocol.h as "NAME value" lines, then "END".
+ *
+ * The frame-view API (dthc_rx_feed, dthc_frame_to_msg, dthc_encode_frame, dthc_get/put_*):
+ *   N <hex>   a stream fed byte by byte to a fresh receiver through dthc_rx_feed. For each
+ *             frame delivered: "FRAME type=.. seq=.. len=.. payload=<hex> inbuf=<0|1>"
+ *             (inbuf: the payload view points into rx.buf, i.e. nothing was copied), then
+ *             "OK <MessageName> ..." (dthc_frame_to_msg) or "ERR <code>", "RE <hex>"
+ *             (dthc_encode_frame from the view into another buffer) and "IP <hex>" (the
+ *             payload copied to DTHC_TX_PAYLOAD_OFFSET and encoded in place). For each
+ *             dropped frame "ERR <code> type=.. seq=.. len=.. payload=<hex> inbuf=.." when
+ *             the frame was filled, "ERR <code> untouched" when it was not. Then a STATS
+ *             line as for S.
+ *   R <hex>   a stream through the old dthc_rx_feed_byte: "MSG ..." per message, "ERR <code>
+ *             reject_type=.. reject_seq=.." per dropped frame, then a STATS line.
+ *   P <hex>   type, seq, payload for dthc_encode_frame: "WIRE <hex>" and "INPLACE <hex>"
+ *             (payload at DTHC_TX_PAYLOAD_OFFSET of the output buffer), then "CAP <n>": the
+ *             smallest cap that works, checking that every smaller cap returns 0 and every
+ *             larger one the same bytes, and that nothing is written past the cap or the
+ *             frame ("CAP BAD <cap>" otherwise). Or "ERR TOO_LONG".
+ *   L <hex>   8 bytes: "LE u16=.. u32=.. i32=.. u64=.. put=<hex>" (dthc_get_* of the
+ *             bytes, then dthc_put_u16/u32/i32/u64 of those values, 18 bytes).
+ *   U <hex>   "CRC <4 hex digits>" by dthc_crc16_update, byte by byte from DTHC_CRC_INIT.
  * Empty lines and lines starting with '#' are ignored; anything else prints "ERR SYNTAX".
  *
  * Fields are printed in the order of firmware_protocol/messages.py: integers in decimal,
@@ -262,7 +283,7 @@ static void print_constants(void)
     K(DTHC_ZVEL_EXPIRY_MIN_MS); K(DTHC_ZVEL_EXPIRY_MAX_MS); K(DTHC_STREAM_SEQ_NEWER_MAX);
     K(DTHC_HOST_WINDOW); K(DTHC_DEFAULT_ACK_TIMEOUT_MS); K(DTHC_MAX_ATTEMPTS);
     K(DTHC_FAULT_REPEAT_MS); K(DTHC_XY_SPEED_UNKNOWN); K(DTHC_SERIAL_LEN);
-    K(DTHC_SAMPLES_HEADER_SIZE); K(DTHC_MAX_SAMPLES);
+    K(DTHC_SAMPLES_HEADER_SIZE); K(DTHC_MAX_SAMPLES); K(DTHC_TX_PAYLOAD_OFFSET);
 
     K(DTHC_MSG_HELLO); K(DTHC_MSG_HEARTBEAT); K(DTHC_MSG_SET_LEASE); K(DTHC_MSG_TORCH);
     K(DTHC_MSG_OHMIC_SENSE); K(DTHC_MSG_Z_MOVE); K(DTHC_MSG_Z_PROBE); K(DTHC_MSG_Z_VELOCITY);
@@ -415,6 +436,8 @@ static void cmd_body(size_t n)
     printf("\n");
 }
 
+static void print_stats(const dthc_rx_t *rx);
+
 static void cmd_stream(size_t n)
 {
     static dthc_rx_t rx;
@@ -428,11 +451,183 @@ static void cmd_stream(size_t n)
             printf("\n");
         }
     }
+    print_stats(&rx);
+}
+
+static void print_stats(const dthc_rx_t *rx)
+{
     printf("STATS frames_ok=%" PRIu32 " crc_errors=%" PRIu32 " framing_errors=%" PRIu32
            " unknown_type=%" PRIu32 " length_errors=%" PRIu32 " dropped_bytes=%" PRIu32
            " bytes_in=%" PRIu32 "\n",
-           rx.frames_ok, rx.crc_errors, rx.framing_errors, rx.unknown_type, rx.length_errors,
-           rx.dropped_bytes, rx.bytes_in);
+           rx->frames_ok, rx->crc_errors, rx->framing_errors, rx->unknown_type,
+           rx->length_errors, rx->dropped_bytes, rx->bytes_in);
+}
+
+static void print_view(const dthc_rx_t *rx, const dthc_frame_t *f)
+{
+    printf("type=%u seq=%u len=%u payload=", (unsigned)f->type, (unsigned)f->seq,
+           (unsigned)f->len);
+    print_hex(f->payload, f->len);
+    printf(" inbuf=%d", f->payload == rx->buf + 2 ? 1 : 0);
+}
+
+static void cmd_view_stream(size_t n)
+{
+    static dthc_rx_t rx;
+    static dthc_msg_t msg;
+    static uint8_t wire[DTHC_MAX_WIRE_FRAME];
+    static const uint8_t marker = 0;
+    /* Sentinel contents: a field the receiver writes no longer matches. */
+    const dthc_frame_t sentinel = {0xA5, 0x5A, &marker, 0xC3};
+    dthc_frame_t f;
+    size_t i;
+    dthc_rx_init(&rx);
+    for (i = 0; i < n; i++) {
+        int rc;
+        f = sentinel;
+        rc = dthc_rx_feed(&rx, g_line[i], &f);
+        if (rc == 1) {
+            size_t len;
+            int rc2;
+            printf("FRAME ");
+            print_view(&rx, &f);
+            printf("\n");
+            rc2 = dthc_frame_to_msg(&f, &msg);
+            if (rc2 == DTHC_OK) {
+                printf("OK ");
+                print_fields(&msg);
+                printf("\n");
+            } else {
+                printf("ERR %s\n", err_name(rc2));
+            }
+            len = dthc_encode_frame(f.type, f.seq, f.payload, f.len, wire, sizeof wire);
+            printf("RE ");
+            print_hex(wire, len);
+            printf("\n");
+            memset(wire, 0xEE, sizeof wire);
+            memcpy(wire + DTHC_TX_PAYLOAD_OFFSET, f.payload, f.len);
+            len = dthc_encode_frame(f.type, f.seq, wire + DTHC_TX_PAYLOAD_OFFSET, f.len, wire,
+                                    sizeof wire);
+            printf("IP ");
+            print_hex(wire, len);
+            printf("\n");
+        } else if (rc < 0) {
+            printf("ERR %s ", err_name(rc));
+            if (f.type == sentinel.type && f.seq == sentinel.seq
+                && f.payload == sentinel.payload && f.len == sentinel.len) {
+                printf("untouched");
+            } else {
+                print_view(&rx, &f);
+            }
+            printf("\n");
+        } else if (f.type != sentinel.type || f.seq != sentinel.seq
+                   || f.payload != sentinel.payload || f.len != sentinel.len) {
+            printf("ERR FRAME_WRITTEN_ON_0\n");
+        }
+    }
+    print_stats(&rx);
+}
+
+static void cmd_old_stream(size_t n)
+{
+    static dthc_rx_t rx;
+    static dthc_msg_t msg;
+    size_t i;
+    dthc_rx_init(&rx);
+    for (i = 0; i < n; i++) {
+        int rc = dthc_rx_feed_byte(&rx, g_line[i], &msg);
+        if (rc == 1) {
+            printf("MSG ");
+            print_fields(&msg);
+            printf("\n");
+        } else if (rc < 0) {
+            printf("ERR %s reject_type=%u reject_seq=%u\n", err_name(rc),
+                   (unsigned)rx.reject_type, (unsigned)rx.reject_seq);
+        }
+    }
+    print_stats(&rx);
+}
+
+static void cmd_encode_frame(size_t n)
+{
+    static uint8_t wire[DTHC_MAX_WIRE_FRAME + 8];
+    static uint8_t other[DTHC_MAX_WIRE_FRAME + 8];
+    size_t len;
+    size_t cap;
+    size_t k;
+    const uint8_t *payload = g_line + 2;
+    size_t plen = n >= 2 ? n - 2 : 0;
+    if (n < 2) {
+        printf("ERR SYNTAX\n");
+        return;
+    }
+    len = dthc_encode_frame(g_line[0], g_line[1], payload, plen, wire, sizeof wire);
+    if (len == 0) {
+        printf("ERR TOO_LONG\n");
+        return;
+    }
+    printf("WIRE ");
+    print_hex(wire, len);
+    printf("\n");
+
+    memset(other, 0xEE, sizeof other);
+    memcpy(other + DTHC_TX_PAYLOAD_OFFSET, payload, plen);
+    printf("INPLACE ");
+    print_hex(other, dthc_encode_frame(g_line[0], g_line[1], other + DTHC_TX_PAYLOAD_OFFSET,
+                                       plen, other, sizeof other));
+    printf("\n");
+
+    for (cap = 0; cap < sizeof other; cap++) {
+        size_t got;
+        memset(other, 0xEE, sizeof other);
+        got = dthc_encode_frame(g_line[0], g_line[1], payload, plen, other, cap);
+        if (cap < len ? got != 0 : (got != len || memcmp(other, wire, len) != 0)) {
+            printf("CAP BAD %u\n", (unsigned)cap);
+            return;
+        }
+        for (k = cap < len ? cap : len; k < sizeof other; k++) {
+            if (other[k] != 0xEE) { /* wrote past cap, or past the frame */
+                printf("CAP BAD %u\n", (unsigned)cap);
+                return;
+            }
+        }
+    }
+    printf("CAP %u\n", (unsigned)len);
+}
+
+static void cmd_le(size_t n)
+{
+    uint8_t out[18];
+    uint16_t u16;
+    uint32_t u32;
+    int32_t i32;
+    uint64_t u64;
+    if (n != 8) {
+        printf("ERR SYNTAX\n");
+        return;
+    }
+    u16 = dthc_get_u16(g_line);
+    u32 = dthc_get_u32(g_line);
+    i32 = dthc_get_i32(g_line);
+    u64 = dthc_get_u64(g_line);
+    dthc_put_u16(out, u16);
+    dthc_put_u32(out + 2, u32);
+    dthc_put_i32(out + 6, i32);
+    dthc_put_u64(out + 10, u64);
+    printf("LE u16=%u u32=%" PRIu32 " i32=%" PRId32 " u64=%" PRIu64 " put=", (unsigned)u16, u32,
+           i32, u64);
+    print_hex(out, sizeof out);
+    printf("\n");
+}
+
+static void cmd_crc_update(size_t n)
+{
+    uint16_t crc = DTHC_CRC_INIT;
+    size_t i;
+    for (i = 0; i < n; i++) {
+        crc = dthc_crc16_update(crc, g_line[i]);
+    }
+    printf("CRC %04X\n", (unsigned)crc);
 }
 
 static void cmd_cobs(int decode, size_t n)
@@ -475,7 +670,7 @@ int main(void)
             print_constants();
             continue;
         }
-        if (c == 0 || strchr("FBSCED", c) == NULL) {
+        if (c == 0 || strchr("FBSCEDNRPLU", c) == NULL) {
             skip_line(c);
             printf("ERR SYNTAX\n");
             continue;
@@ -491,6 +686,11 @@ int main(void)
         case 'S': cmd_stream((size_t)n); break;
         case 'C': printf("CRC %04X\n", (unsigned)dthc_crc16(g_line, (size_t)n)); break;
         case 'E': cmd_cobs(0, (size_t)n); break;
+        case 'N': cmd_view_stream((size_t)n); break;
+        case 'R': cmd_old_stream((size_t)n); break;
+        case 'P': cmd_encode_frame((size_t)n); break;
+        case 'L': cmd_le((size_t)n); break;
+        case 'U': cmd_crc_update((size_t)n); break;
         default: cmd_cobs(1, (size_t)n); break;
         }
         fflush(stdout);

@@ -2,7 +2,9 @@
 
 The C sources are compiled once per module with the system compiler and strict flags into a
 temporary directory; ``vector_check`` (see its header comment) drives the C codec from text
-lines, so one process run checks a whole batch of frames.
+lines, so one process run checks a whole batch of frames. The small-MCU API (frame views,
+in-place receive, one-pass encoding, the CRC table) is checked the same way, and the codec
+is built with avr-gcc for an ATmega328P when that compiler is installed.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ from typing import Any
 
 import pytest
 from cobs import cobs
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 import firmware_protocol as fp
 from firmware_protocol import constants, vectors
@@ -29,6 +33,10 @@ C_DIR = Path(fp.__file__).resolve().parent / "c"
 SOURCES = (C_DIR / "dthc_protocol.c", C_DIR / "vector_check.c")
 CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
 SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-g")
+AVR_CFLAGS = ("-mmcu=atmega328p", "-Os", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
+# DTHC_TX_PAYLOAD_OFFSET: a payload this far into the output buffer can be encoded in place.
+TX_PAYLOAD_OFFSET = 3
+CRC_POLY = 0x1021  # CRC-16/CCITT-FALSE (PROTOCOL.md 2); constants.py has no name for it
 
 GOLDEN = vectors.load()
 FRAMES: list[dict[str, Any]] = GOLDEN["frames"]
@@ -252,8 +260,12 @@ def test_library_uses_only_the_allowed_headers() -> None:
 
 
 def test_crc_check_value(c_tool: CTool) -> None:
-    """C dthc_crc16 gives the CRC-16/CCITT-FALSE check value 0x29B1 for b"123456789"."""
-    assert c_tool.run([f"C {b'123456789'.hex()}"]) == [f"CRC {constants.CRC_CHECK_VALUE:04X}"]
+    """C dthc_crc16 and dthc_crc16_update give the CRC-16/CCITT-FALSE check value 0x29B1 for
+    b"123456789"."""
+    check = b"123456789".hex()
+    want = f"CRC {constants.CRC_CHECK_VALUE:04X}"
+    assert want == "CRC 29B1"
+    assert c_tool.run([f"C {check}", f"U {check}"]) == [want, want]
 
 
 def test_crc_agrees_with_python(c_tool: CTool) -> None:
@@ -283,6 +295,7 @@ def test_constants_match_python(c_tool: CTool) -> None:
             assert c_values.get(f"DTHC_{name}") == value, name
     assert c_values["DTHC_MAX_SAMPLES"] == MAX_SAMPLES
     assert c_values["DTHC_RX_BUF_SIZE"] == constants.MAX_ENCODED_FRAME + 1
+    assert c_values["DTHC_TX_PAYLOAD_OFFSET"] == TX_PAYLOAD_OFFSET
 
 
 @pytest.mark.parametrize("vector", FRAMES, ids=[f["name"] for f in FRAMES])
@@ -493,6 +506,366 @@ def test_sanitized_build_runs_every_vector(
         *(f"E {d.hex()}" for d in _cobs_inputs(rng)),
         *(f"D {rng.randbytes(rng.randrange(300)).hex()}" for _ in range(50)),
         f"F {'01' * 600}00",
+        *(f"N {f['frame_hex']}" for f in FRAMES),
+        *(f"N {c['stream_hex']}" for c in CORRUPT),
+        *(f"R {c['stream_hex']}" for c in CORRUPT),
+        f"N {_rejects_stream().hex()}",
+        f"R {_rejects_stream().hex()}",
+        "N " + rng.randbytes(3000).hex(),
+        *(f"P {f['body_hex']}" for f in FRAMES),
+        *(f"P {rng.randbytes(n).hex()}" for n in (2, 3, 200, 254, 255, 256)),
+        *(f"L {rng.randbytes(8).hex()}" for _ in range(10)),
+        *(f"U {rng.randbytes(rng.randrange(100)).hex()}" for _ in range(10)),
         "K",
     ]
     assert sanitized.run(lines) == c_tool.run(lines)
+
+
+# --- the small-MCU API: CRC table, frame views, in-place receive, one-pass encoding -----------
+
+
+def _crc16_bitwise(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE one bit at a time, straight from the definition (PROTOCOL.md 2)."""
+    crc = constants.CRC_INIT
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ CRC_POLY) if crc & 0x8000 else crc << 1
+            crc &= 0xFFFF
+    return crc
+
+
+def test_crc_table_is_the_polynomial_table_in_flash_on_avr() -> None:
+    """dthc_protocol.c carries a 256-entry table T[i] = bitwise CRC register of i << 8, which
+    dthc_crc16_update uses, and on AVR it is PROGMEM read with pgm_read_word."""
+    source = (C_DIR / "dthc_protocol.c").read_text()
+    found = re.search(r"dthc_crc_table\[256\][^=]*=\s*\{([^}]*)\}", source)
+    assert found, "no 256-entry CRC table in dthc_protocol.c"
+    table = [int(v, 16) for v in re.findall(r"0x([0-9A-Fa-f]{1,4})", found[1])]
+    want = []
+    for i in range(256):
+        reg = i << 8
+        for _ in range(8):
+            reg = ((reg << 1) ^ CRC_POLY) if reg & 0x8000 else reg << 1
+            reg &= 0xFFFF
+        want.append(reg)
+    assert table == want
+    avr = source[source.index("#ifdef __AVR__") : source.index("#endif")]
+    assert "PROGMEM" in avr, avr
+    assert "pgm_read_word" in avr, avr
+    update = source[source.index("uint16_t dthc_crc16_update(") :]
+    assert "DTHC_CRC_STEP" in update[: update.index("}")]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.binary(max_size=300), min_size=1, max_size=20))
+@example([b"123456789", b"", b"\x00", b"\xff" * 300])
+def test_crc_table_equals_bitwise_crc(c_tool: CTool, blobs: list[bytes]) -> None:
+    """The table-driven dthc_crc16 and dthc_crc16_update equal the bitwise CRC on any data."""
+    lines = c_tool.run([*(f"C {b.hex()}" for b in blobs), *(f"U {b.hex()}" for b in blobs)])
+    want = [f"CRC {_crc16_bitwise(b):04X}" for b in blobs]
+    assert lines == want + want
+
+
+@pytest.fixture(scope="module")
+def golden_views_in_c(c_tool: CTool) -> dict[str, list[str]]:
+    """vector_check's ``N`` output (frame-view receiver) for each golden frame, by name."""
+    out = {}
+    lines = c_tool.run(f"N {f['frame_hex']}" for f in FRAMES)
+    assert len(lines) == 5 * len(FRAMES), lines[:10]
+    for i, f in enumerate(FRAMES):
+        out[f["name"]] = lines[5 * i : 5 * i + 5]
+    return out
+
+
+@pytest.mark.parametrize("vector", FRAMES, ids=[f["name"] for f in FRAMES])
+def test_golden_frame_through_frame_view(
+    golden_views_in_c: dict[str, list[str]], vector: dict[str, Any]
+) -> None:
+    """dthc_rx_feed hands out the golden frame's type, seq and payload as a view into the
+    receiver's own buffer (no copy); dthc_frame_to_msg unpacks it to the JSON fields; and
+    dthc_encode_frame re-encodes the view to exactly the golden wire bytes, also in place."""
+    frame_line, ok, re_line, ip_line, stats = golden_views_in_c[vector["name"]]
+    body = bytes.fromhex(vector["body_hex"])
+    assert frame_line == (
+        f"FRAME type={body[0]} seq={body[1]} len={len(body) - 2} payload={body[2:].hex()} inbuf=1"
+    )
+    assert ok.startswith("OK "), ok
+    _assert_same(_parse_message(ok[3:]), (vector["message"], vector["fields"]))
+    assert re_line == f"RE {vector['frame_hex']}"
+    assert ip_line == f"IP {vector['frame_hex']}"
+    assert stats.startswith("STATS frames_ok=1 crc_errors=0 framing_errors=0 "), stats
+
+
+def test_golden_bodies_encode_in_one_pass(c_tool: CTool) -> None:
+    """dthc_encode_frame(type, seq, payload) gives every golden wire frame, from a separate
+    payload and in place at DTHC_TX_PAYLOAD_OFFSET; a smaller cap returns 0 and writes
+    nothing past it."""
+    lines = c_tool.run(f"P {f['body_hex']}" for f in FRAMES)
+    assert len(lines) == 3 * len(FRAMES), lines[:6]
+    for i, f in enumerate(FRAMES):
+        wire = f["frame_hex"]
+        assert lines[3 * i : 3 * i + 3] == [
+            f"WIRE {wire}",
+            f"INPLACE {wire}",
+            f"CAP {len(wire) // 2}",
+        ], f["name"]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.integers(0, 255), st.integers(0, 255), st.binary(max_size=260)),
+        min_size=1,
+        max_size=12,
+    )
+)
+@example([(0x83, 0, bytes(252)), (0x80, 7, b"\xff" * 252), (1, 1, b""), (2, 0, bytes(253))])
+def test_encode_frame_matches_python(c_tool: CTool, frames: list[tuple[int, int, bytes]]) -> None:
+    """Any type, seq and payload of up to 252 bytes encodes as the Python codec does (also in
+    place, and with the smallest cap); a longer payload is refused with 0."""
+    bodies = [bytes((t, q)) + payload for t, q, payload in frames]
+    lines = iter(c_tool.run(f"P {b.hex()}" for b in bodies))
+    for body in bodies:
+        if len(body) - 2 > constants.MAX_PAYLOAD:
+            assert next(lines) == "ERR TOO_LONG"
+            continue
+        wire = fp.encode_frame(body)
+        assert [next(lines) for _ in range(3)] == [
+            f"WIRE {wire.hex()}",
+            f"INPLACE {wire.hex()}",
+            f"CAP {len(wire)}",
+        ]
+    assert next(lines, None) is None
+
+
+def _framed(body: bytes) -> bytes:
+    """A wire frame with a valid CRC, whatever the body says."""
+    return fp.encode_frame(body)
+
+
+# (body, the error dthc_rx_feed reports): valid CRC, unknown type or wrong payload length.
+REJECTS: list[tuple[bytes, str]] = [
+    (b"\x7f\x2a" + b"abc", "UNKNOWN_TYPE"),
+    (b"\x00\x09", "UNKNOWN_TYPE"),
+    (b"\x8a\xc8" + bytes(8), "UNKNOWN_TYPE"),
+    (b"\x04\x2b\x01\x01", "BAD_LENGTH"),  # TORCH with 2 bytes
+    (b"\x02\xff\x00", "BAD_LENGTH"),  # HEARTBEAT with a payload byte
+    (b"\x01\x05" + bytes(5), "BAD_LENGTH"),  # HELLO one byte short
+    (b"\x83\x00" + bytes(20), "BAD_LENGTH"),  # SAMPLES with half a sample
+]
+
+
+def _rejects_stream() -> bytes:
+    """Each rejected frame, then a CRC-damaged frame and a torn COBS frame (which carry no
+    usable seq), then a valid TORCH: the receiver must deliver the last one."""
+    torch = bytes.fromhex(FRAME_BY_NAME["torch_on"]["frame_hex"])  # TORCH on, seq 4
+    bad_crc = bytearray(_framed(bytes.fromhex("0c1100")))
+    bad_crc[-2] ^= 0x01
+    return b"".join(_framed(b) for b, _ in REJECTS) + bytes(bad_crc) + b"\x05\x01\x00" + torch
+
+
+def test_rejected_frame_yields_its_seq_and_type(c_tool: CTool) -> None:
+    """A frame with a valid CRC but an unknown type or a wrong payload length comes out of
+    dthc_rx_feed as DTHC_ERR_UNKNOWN_TYPE / DTHC_ERR_BAD_LENGTH with *frame filled (type, seq,
+    payload, length, a view into rx.buf), so a firmware can NAK its seq (PROTOCOL.md 7);
+    after a CRC or COBS error *frame is untouched; the counters are the old receiver's."""
+    stream = _rejects_stream()
+    lines = c_tool.run([f"N {stream.hex()}", f"S {stream.hex()}"])
+    want = [
+        f"ERR {err} type={b[0]} seq={b[1]} len={len(b) - 2} payload={b[2:].hex()} inbuf=1"
+        for b, err in REJECTS
+    ]
+    want += ["ERR CRC untouched", "ERR COBS untouched"]
+    assert lines[: len(want)] == want
+    assert lines[len(want)] == "FRAME type=4 seq=4 len=1 payload=01 inbuf=1"
+    assert lines[len(want) + 1].startswith("OK Torch seq=4 on=1"), lines[len(want) + 1]
+    view_stats, old_stats = lines[len(want) + 4], lines[-1]
+    assert view_stats == old_stats
+    stats = {k: int(v) for k, v in (p.split("=") for p in view_stats.split(" ")[1:])}
+    assert (stats["unknown_type"], stats["length_errors"]) == (3, 4)
+    assert (stats["crc_errors"], stats["framing_errors"], stats["frames_ok"]) == (1, 1, 1)
+
+
+def test_old_api_reports_reject_seq_and_type(c_tool: CTool) -> None:
+    """dthc_rx_feed_byte sets rx.reject_type and rx.reject_seq for a frame dropped for an
+    unknown type or a bad length, and leaves them alone for other errors."""
+    lines = c_tool.run([f"R {_rejects_stream().hex()}"])
+    want = [f"ERR {err} reject_type={b[0]} reject_seq={b[1]}" for b, err in REJECTS]
+    last = REJECTS[-1][0]
+    want += [f"ERR {e} reject_type={last[0]} reject_seq={last[1]}" for e in ("CRC", "COBS")]
+    assert lines[: len(want)] == want
+    assert lines[len(want)].startswith("MSG Torch seq=4 on=1"), lines[len(want)]
+
+
+@pytest.mark.parametrize("vector", CORRUPT, ids=[c["name"] for c in CORRUPT])
+def test_frame_view_receiver_counts_like_the_message_receiver(
+    c_tool: CTool, vector: dict[str, Any]
+) -> None:
+    """On every damaged golden stream dthc_rx_feed delivers the same messages (through
+    dthc_frame_to_msg) and the same counters as dthc_rx_feed_byte."""
+    stream = vector["stream_hex"]
+    view = c_tool.run([f"N {stream}"])
+    msgs, stats = _parse_stream(c_tool.run([f"S {stream}"]))
+    ok = [_parse_message(line[3:]) for line in view if line.startswith("OK ")]
+    assert ok == msgs
+    assert view[-1].startswith("STATS ")
+    assert {k: int(v) for k, v in (p.split("=") for p in view[-1].split(" ")[1:])} == stats
+    frames = [line for line in view if line.startswith("FRAME ")]
+    assert len(frames) == len(msgs)
+    assert all(f.endswith(" inbuf=1") for f in frames)
+
+
+def test_random_messages_through_frame_views(c_tool: CTool) -> None:
+    """200 random valid messages of every type encoded by Python come out of dthc_rx_feed
+    with the Python fields, and dthc_encode_frame gives back the same wire bytes."""
+    messages = _random_messages(200, seed=328)
+    wires = [fp.encode(m) for m in messages]
+    lines = c_tool.run(f"N {w.hex()}" for w in wires)
+    assert len(lines) == 5 * len(messages), lines[:5]
+    for i, (msg, wire) in enumerate(zip(messages, wires, strict=True)):
+        frame, ok, re_line, ip_line, _stats = lines[5 * i : 5 * i + 5]
+        body = fp.encode_message(msg)
+        assert frame == (
+            f"FRAME type={body[0]} seq={body[1]} len={len(body) - 2} payload={body[2:].hex()}"
+            " inbuf=1"
+        )
+        _assert_same(_parse_message(ok[3:]), (type(msg).__name__, _py_fields(msg)))
+        assert re_line == ip_line.replace("IP", "RE", 1) == f"RE {wire.hex()}"
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.lists(st.binary(min_size=8, max_size=8), min_size=1, max_size=50))
+@example([bytes(8), b"\xff" * 8, b"\x00\x00\x00\x80" * 2, b"\xff\xff\xff\x7f" * 2])
+def test_little_endian_helpers_match_struct(c_tool: CTool, blobs: list[bytes]) -> None:
+    """dthc_get_u16/u32/i32/u64 read little-endian fields as struct does, and
+    dthc_put_u16/u32/i32/u64 write them back byte for byte."""
+    lines = c_tool.run(f"L {b.hex()}" for b in blobs)
+    for blob, line in zip(blobs, lines, strict=True):
+        (u16,) = struct.unpack_from("<H", blob)
+        (u32,) = struct.unpack_from("<I", blob)
+        (i32,) = struct.unpack_from("<i", blob)
+        (u64,) = struct.unpack_from("<Q", blob)
+        put = struct.pack("<HIiQ", u16, u32, i32, u64)
+        assert line == f"LE u16={u16} u32={u32} i32={i32} u64={u64} put={put.hex()}"
+
+
+# --- the codec on an 8-bit MCU (avr-gcc, ATmega328P) ---------------------------------------
+
+AVR_PROGRAM = r"""
+#include <avr/io.h>
+#include "dthc_protocol.h"
+
+/* A minimal board loop on the frame-view API alone: receive, ACK or NAK in place. */
+static dthc_rx_t rx;
+static uint8_t tx[DTHC_MAX_WIRE_FRAME];
+
+static void send(size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        while (!(UCSR0A & (1 << UDRE0))) {
+        }
+        UDR0 = tx[i];
+    }
+}
+
+int main(void)
+{
+    dthc_frame_t f;
+    uint8_t *p = tx + DTHC_TX_PAYLOAD_OFFSET;
+    dthc_rx_init(&rx);
+    for (;;) {
+        int rc;
+        while (!(UCSR0A & (1 << RXC0))) {
+        }
+        rc = dthc_rx_feed(&rx, UDR0, &f);
+        if (rc == 1) {
+            dthc_put_u32(p, dthc_get_u32(f.payload) + 1u);
+            send(dthc_encode_frame(DTHC_MSG_ACK, f.seq, p, 4, tx, sizeof tx));
+        } else if (rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) {
+            dthc_put_u32(p, 0);
+            p[4] = (uint8_t)(rc == DTHC_ERR_UNKNOWN_TYPE ? DTHC_NAK_UNKNOWN_TYPE
+                                                         : DTHC_NAK_BAD_LENGTH);
+            p[5] = 0;
+            send(dthc_encode_frame(DTHC_MSG_NAK, f.seq, p, 6, tx, sizeof tx));
+        }
+    }
+}
+"""
+
+
+def _avr_size(path: Path) -> dict[str, int]:
+    """avr-size's Berkeley columns text/data/bss of an object or ELF file."""
+    proc = subprocess.run(
+        ["avr-size", str(path)], capture_output=True, text=True, timeout=60, check=True
+    )
+    header, row = proc.stdout.splitlines()[:2]
+    return dict(zip(header.split()[:3], (int(v) for v in row.split()[:3]), strict=True))
+
+
+def test_codec_builds_for_atmega328p(tmp_path: Path) -> None:
+    """dthc_protocol.c compiles warning-free with avr-gcc -mmcu=atmega328p -Os -std=c99
+    -pedantic -Werror; no function needs a stack frame over 64 bytes (the old parser kept a
+    254-byte message on the stack); a board loop on the frame-view API links, and neither it
+    nor the whole codec puts a byte in .data: the CRC table and the payload-size table stay in
+    flash (a const table or a switch gcc turns into a table would be copied to RAM on AVR).
+    Sizes are printed (pytest -s)."""
+    if shutil.which("avr-gcc") is None or shutil.which("avr-size") is None:
+        pytest.skip("avr-gcc or avr-size not installed (Debian: gcc-avr binutils-avr avr-libc)")
+    obj = tmp_path / "dthc_protocol.o"
+    cmd = [
+        "avr-gcc",
+        *AVR_CFLAGS,
+        "-fstack-usage",
+        "-c",
+        str(C_DIR / "dthc_protocol.c"),
+        "-o",
+        str(obj),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0, f"avr-gcc failed:\n{proc.stderr}"
+    assert proc.stderr == "", proc.stderr
+    size = _avr_size(obj)
+    assert (size["data"], size["bss"]) == (0, 0), size
+    assert size["text"] < 8 * 1024, size
+    whole = tmp_path / "whole.elf"
+    (tmp_path / "empty.c").write_text("int main(void) { return 0; }\n")
+    link_all = ["avr-gcc", *AVR_CFLAGS, str(tmp_path / "empty.c"), str(obj), "-o", str(whole)]
+    proc = subprocess.run(link_all, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert _avr_size(whole)["data"] == 0, "the codec puts tables in RAM on AVR"
+
+    frames = {}
+    for line in (tmp_path / "dthc_protocol.su").read_text().splitlines():
+        where, nbytes, _kind = line.split("\t")
+        frames[where.rsplit(":", 1)[-1]] = int(nbytes)
+    assert {"dthc_rx_feed", "dthc_encode_frame"} <= set(frames), frames
+    assert max(frames.values()) <= 64, frames
+
+    main_c = tmp_path / "board.c"
+    main_c.write_text(AVR_PROGRAM)
+    elf = tmp_path / "board.elf"
+    link = [
+        "avr-gcc",
+        *AVR_CFLAGS,
+        "-ffunction-sections",
+        "-fdata-sections",
+        "-Wl,--gc-sections",
+        f"-I{C_DIR}",
+        str(main_c),
+        str(C_DIR / "dthc_protocol.c"),
+        "-o",
+        str(elf),
+    ]
+    proc = subprocess.run(link, capture_output=True, text=True, timeout=120, check=False)
+    assert proc.returncode == 0, f"avr-gcc (board loop) failed:\n{proc.stderr}"
+    board = _avr_size(elf)
+    assert board["data"] == 0, board
+    print(
+        f"\navr-gcc {' '.join(AVR_CFLAGS)} dthc_protocol.c: .text {size['text']} B "
+        f"(CRC table 512 B of it, in flash), .data {size['data']} B, .bss {size['bss']} B; "
+        f"largest stack frame {max(frames.values())} B ({max(frames, key=frames.__getitem__)})"
+        f"\nminimal board loop on the frame-view API, linked with --gc-sections: "
+        f".text {board['text']} B, .data {board['data']} B, .bss {board['bss']} B"
+    )
