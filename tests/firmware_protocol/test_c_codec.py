@@ -639,6 +639,30 @@ def test_encode_frame_matches_python(c_tool: CTool, frames: list[tuple[int, int,
     assert next(lines, None) is None
 
 
+def test_encode_frame_at_cobs_block_edges(c_tool: CTool) -> None:
+    """Frames whose 254-byte COBS block ends at, just before or just after the last CRC byte
+    (no zero, or a zero among the CRC bytes) encode as the Python codec does."""
+    rng = random.Random(254)
+    bodies = []
+    for n in range(246, constants.MAX_PAYLOAD + 1):
+        for _ in range(6):
+            body = bytes((0x83, rng.randrange(1, 256))) + bytes(
+                rng.randrange(1, 256) for _ in range(n)
+            )
+            bodies.append(body)
+    crcs = [fp.crc16(b) for b in bodies]
+    assert any(c & 0xFF00 and c & 0xFF for c in crcs), "no block ending on the CRC"
+    assert any(not (c & 0xFF00 and c & 0xFF) for c in crcs), "no zero among the CRC bytes"
+    lines = iter(c_tool.run(f"P {b.hex()}" for b in bodies))
+    for body in bodies:
+        wire = fp.encode_frame(body)
+        assert [next(lines) for _ in range(3)] == [
+            f"WIRE {wire.hex()}",
+            f"INPLACE {wire.hex()}",
+            f"CAP {len(wire)}",
+        ], body.hex()
+
+
 def _framed(body: bytes) -> bytes:
     """A wire frame with a valid CRC, whatever the body says."""
     return fp.encode_frame(body)
