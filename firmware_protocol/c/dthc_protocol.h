@@ -505,9 +505,9 @@ typedef struct {
 int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out);
 
 /* Streaming receiver (PROTOCOL.md section 2, "Receiving and resynchronising").
- * COBS decoding and the CRC run as the bytes arrive, into buf, so a byte costs O(1) and
- * a completed frame is handed out as a view of buf (dthc_rx_feed). The counters mean what the Python
- * firmware_protocol.stream.DecoderStats counters mean:
+ * COBS decoding and the CRC run as the bytes arrive, into buf, so a byte costs O(1) and a
+ * completed frame is handed out as a view of buf (dthc_rx_feed). The counters mean what
+ * the Python firmware_protocol.stream.DecoderStats counters mean:
  *   frames_ok       valid messages delivered
  *   crc_errors      frames with a bad CRC
  *   framing_errors  invalid COBS, decoded length < 4 or > DTHC_MAX_FRAME, or more than
