@@ -1,0 +1,460 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/*
+ * board.c - the MCU on simavr and its wiring: UART0 (host bytes in at line rate, board
+ * bytes out), STEP/DIR counted into a physical Z, the torch relay and ohmic-enable outputs,
+ * the inputs (active LOW) and the arc ADC channel, set at each conversion.
+ */
+#include <string.h>
+#include <unistd.h>
+
+#include "avr_adc.h"
+#include "avr_ioport.h"
+#include "avr_uart.h"
+#include "sim_cycle_timers.h"
+#include "sim_elf.h"
+
+#include "host.h"
+
+#define MCUSR_ADDR 0x54 /* MCUSR, I/O 0x34, on both the 328P and the 2560 */
+#define MCUSR_PORF 0x01
+#define MCUSR_EXTRF 0x02
+
+static avr_uart_t *uart_of(struct emu *e) { return (avr_uart_t *)e->uart; }
+
+uint64_t board_cycles(struct emu *e) { return e->cycle_base + e->avr->cycle; }
+
+uint64_t board_us(struct emu *e) { return board_cycles(e) / EMU_CYCLES_PER_US; }
+
+double board_z_mm(const struct emu *e)
+{
+	return (double)e->z_steps / (double)e->pins->steps_per_mm;
+}
+
+int board_rx_enabled(struct emu *e)
+{
+	avr_uart_t *u = uart_of(e);
+	return avr_regbit_get(e->avr, u->rxen) != 0;
+}
+
+static int rx_fifo_full(struct emu *e)
+{
+	avr_uart_t *u = uart_of(e);
+	unsigned next = ((unsigned)u->input.write + 1u) & (uart_fifo_fifo_size - 1u);
+	return next == (unsigned)u->input.read;
+}
+
+static unsigned rx_fifo_used(struct emu *e)
+{
+	avr_uart_t *u = uart_of(e);
+	return ((unsigned)u->input.write - (unsigned)u->input.read) & (uart_fifo_fifo_size - 1u);
+}
+
+/* Cycles one 8N1 character takes at the baud rate the firmware set (UBRR0, U2X0). */
+static uint64_t byte_cycles(struct emu *e)
+{
+	avr_uart_t *u = uart_of(e);
+	avr_t *avr = e->avr;
+	unsigned ubrr = avr->data[u->ubrrl.reg];
+	if (u->ubrrh.reg)
+		ubrr |= (unsigned)(avr->data[u->ubrrh.reg] & 0x0f) << 8;
+	unsigned div = avr_regbit_get(avr, u->u2x) ? 8u : 16u;
+	return (uint64_t)(ubrr + 1u) * div * 10u;
+}
+
+static avr_cycle_count_t wake_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	(void)avr;
+	(void)when;
+	(void)param;
+	return 0; /* only bounds a sleeping core's jump, so the next event is on time */
+}
+
+static int wake_rx_tag, wake_slice_tag;
+
+static void wake_at(struct emu *e, uint64_t at_cycles, int *tag)
+{
+	uint64_t now = board_cycles(e);
+	avr_cycle_count_t in = at_cycles > now ? at_cycles - now : 1;
+	avr_cycle_timer_register(e->avr, in, wake_timer, tag);
+}
+
+/* Hand the next host byte to the receiver, at line rate, never into a full FIFO. */
+static void deliver_rx(struct emu *e)
+{
+	uint64_t now = board_cycles(e);
+	if (!board_rx_enabled(e)) {
+		/* A UART that is off (reset, boot) loses what arrives, as a real one does. */
+		record_event(e, "rx_dropped", "%zu,receiver_off", e->rx_len);
+		e->rx_dropped += e->rx_len;
+		e->rx_len = 0;
+		e->rx_head = 0;
+		e->rx_frame.len = e->rx_frame.raw_len = 0;
+		return;
+	}
+	if (e->xoff && rx_fifo_used(e) > 0)
+		return;
+	e->xoff = 0;
+	if (rx_fifo_full(e))
+		return;
+	uint8_t byte = e->rx[e->rx_head];
+	e->rx_head = (e->rx_head + 1) % EMU_RX_BUFFER;
+	e->rx_len--;
+	e->rx_bytes++;
+	avr_raise_irq(e->uart_in, byte);
+	frame_byte(e, &e->rx_frame, byte, "host_frame");
+	e->rx_next_cycle = now + byte_cycles(e);
+	if (e->rx_len)
+		wake_at(e, e->rx_next_cycle, &wake_rx_tag);
+}
+
+void board_queue_rx(struct emu *e, const uint8_t *data, size_t n)
+{
+	for (size_t i = 0; i < n; i++) {
+		if (e->rx_len == EMU_RX_BUFFER) {
+			e->rx_dropped++;
+			continue;
+		}
+		e->rx[(e->rx_head + e->rx_len) % EMU_RX_BUFFER] = data[i];
+		e->rx_len++;
+	}
+	if (e->rx_len)
+		wake_at(e, e->rx_next_cycle, &wake_rx_tag);
+}
+
+static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	uint8_t byte = (uint8_t)value;
+	e->tx_bytes++;
+	if (e->tx_len < EMU_TX_BUFFER)
+		e->tx[e->tx_len++] = byte;
+	else
+		e->tx_dropped++;
+	frame_byte(e, &e->tx_frame, byte, "board_frame");
+}
+
+static void uart_xoff_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	if (value)
+		e->xoff = 1;
+}
+
+static void uart_xon_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	(void)value;
+	struct emu *e = param;
+	e->xoff = 0;
+}
+
+static void adc_trigger_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	union {
+		avr_adc_mux_t mux;
+		uint32_t v;
+	} m = {.v = value};
+	if (m.mux.kind != ADC_MUX_SINGLE || (int)m.mux.src != e->pins->arc_adc)
+		return;
+	uint64_t t = board_us(e);
+	board_apply_inputs(e, 0);
+	double volts = plant_arc_voltage(e, t);
+	double mv = volts / (double)e->pins->arc_divider * 1000.0;
+	if (mv < 0.0)
+		mv = 0.0;
+	if (mv > (double)e->pins->adc_ref_mv)
+		mv = (double)e->pins->adc_ref_mv;
+	avr_raise_irq(e->adc_irq + ADC_IRQ_ADC0 + e->pins->arc_adc, (uint32_t)(mv + 0.5));
+}
+
+static void step_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	int level = value ? 1 : 0;
+	int rising = level && !e->step_level;
+	e->step_level = level;
+	if (!rising)
+		return;
+	if (e->z_en_level) { /* ENA- high: the driver is disabled and ignores steps */
+		e->steps_ignored++;
+		return;
+	}
+	e->z_steps += e->dir_level ? 1 : -1;
+	board_apply_inputs(e, 0);
+}
+
+static void dir_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	((struct emu *)param)->dir_level = value ? 1 : 0;
+}
+
+static void torch_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	int level = value ? 1 : 0;
+	if (level == e->torch_level)
+		return;
+	e->torch_level = level;
+	uint64_t t = board_us(e);
+	record_event(e, "torch", "%d", level);
+	plant_torch(e, level, t);
+	board_apply_inputs(e, 0);
+}
+
+static void ohmic_en_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	int level = value ? 1 : 0;
+	if (level == e->ohmic_en_level)
+		return;
+	e->ohmic_en_level = level;
+	record_event(e, "ohmic_enable", "%d", level);
+	board_apply_inputs(e, 0);
+}
+
+static void z_en_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+	(void)irq;
+	struct emu *e = param;
+	int level = value ? 1 : 0;
+	if (level == e->z_en_level)
+		return;
+	e->z_en_level = level;
+	record_event(e, "z_enable_pin", "%d", level);
+}
+
+static avr_ioport_t *port_of(struct emu *e, char letter)
+{
+	int i = letter - 'A';
+	if (i < 0 || i >= (int)(sizeof e->ports / sizeof e->ports[0]))
+		return NULL;
+	return (avr_ioport_t *)e->ports[i];
+}
+
+static int bind_pin(struct emu *e, struct pin_ref *ref, struct pin_map map, const char *what)
+{
+	ref->port = map.port;
+	ref->bit = map.bit;
+	ref->irq = avr_io_getirq(e->avr, AVR_IOCTL_IOPORT_GETIRQ(map.port), map.bit);
+	if (!ref->irq || !port_of(e, map.port)) {
+		fprintf(stderr, "dthc-emulated-board-host: no pin %c%d (%s) on %s\n", map.port,
+			map.bit, what, e->mcu);
+		return -1;
+	}
+	return 0;
+}
+
+static void find_ios(struct emu *e)
+{
+	for (avr_io_t *io = e->avr->io_port; io; io = io->next) {
+		if (!strcmp(io->kind, "uart") && ((avr_uart_t *)io)->name == '0')
+			e->uart = io;
+		if (!strcmp(io->kind, "port")) {
+			avr_ioport_t *p = (avr_ioport_t *)io;
+			int i = p->name - 'A';
+			if (i >= 0 && i < (int)(sizeof e->ports / sizeof e->ports[0]))
+				e->ports[i] = p;
+		}
+	}
+}
+
+static void set_uart_flags(struct emu *e)
+{
+	uint32_t flags = 0;
+	avr_ioctl(e->avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+	/* POLL_SLEEP: simavr would usleep on every idle status read (1000x slower);
+	 * STDIO: it would print the board's bytes on our stdout. */
+	flags &= ~(uint32_t)(AVR_UART_FLAG_POLL_SLEEP | AVR_UART_FLAG_STDIO);
+	avr_ioctl(e->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+	e->uart_flags = flags;
+}
+
+static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
+{
+	(void)avr;
+	(void)how_long; /* the host paces simulated time to the wall clock itself */
+}
+
+int board_init(struct emu *e)
+{
+	elf_firmware_t fw;
+	memset(&fw, 0, sizeof fw);
+	if (access(e->elf_path, R_OK) != 0) {
+		fprintf(stderr, "dthc-emulated-board-host: cannot read the firmware ELF %s\n",
+			e->elf_path);
+		return -1;
+	}
+	if (elf_read_firmware(e->elf_path, &fw) != 0) {
+		fprintf(stderr, "dthc-emulated-board-host: %s is not a firmware ELF simavr can load\n",
+			e->elf_path);
+		return -1;
+	}
+	if (fw.mmcu[0] && strcmp(fw.mmcu, e->mcu) != 0)
+		fprintf(stderr, "dthc-emulated-board-host: warning: the ELF says mcu %s, running %s\n",
+			fw.mmcu, e->mcu);
+	e->avr = avr_make_mcu_by_name(e->mcu);
+	if (!e->avr) {
+		fprintf(stderr, "dthc-emulated-board-host: simavr does not know mcu %s\n", e->mcu);
+		return -1;
+	}
+	avr_init(e->avr);
+	fw.frequency = EMU_FREQUENCY_HZ;
+	fw.vcc = fw.avcc = fw.aref = (uint32_t)e->pins->adc_ref_mv;
+	avr_load_firmware(e->avr, &fw);
+	e->avr->frequency = EMU_FREQUENCY_HZ;
+	e->avr->vcc = e->avr->avcc = e->avr->aref = (uint32_t)e->pins->adc_ref_mv;
+	e->avr->sleep = no_sleep;
+	e->avr->log = 1; /* warnings only */
+
+	find_ios(e);
+	if (!e->uart) {
+		fprintf(stderr, "dthc-emulated-board-host: %s has no UART0 in simavr\n", e->mcu);
+		return -1;
+	}
+	set_uart_flags(e);
+	e->uart_in = avr_io_getirq(e->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+	avr_irq_register_notify(avr_io_getirq(e->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+				uart_out_hook, e);
+	avr_irq_register_notify(avr_io_getirq(e->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF),
+				uart_xoff_hook, e);
+	avr_irq_register_notify(avr_io_getirq(e->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
+				uart_xon_hook, e);
+	e->adc_irq = avr_io_getirq(e->avr, AVR_IOCTL_ADC_GETIRQ, 0);
+	if (!e->adc_irq) {
+		fprintf(stderr, "dthc-emulated-board-host: %s has no ADC in simavr\n", e->mcu);
+		return -1;
+	}
+	avr_irq_register_notify(e->adc_irq + ADC_IRQ_OUT_TRIGGER, adc_trigger_hook, e);
+
+	const struct board_pins *p = e->pins;
+	if (bind_pin(e, &e->step, p->step, "STEP") || bind_pin(e, &e->dir, p->dir, "DIR") ||
+	    bind_pin(e, &e->torch, p->torch, "TORCH") ||
+	    bind_pin(e, &e->ohmic_en, p->ohmic_en, "OHMIC_ENABLE") ||
+	    bind_pin(e, &e->z_en, p->z_en, "Z_ENABLE"))
+		return -1;
+	for (int i = 0; i < IN_COUNT; i++) {
+		e->in_present[i] = p->in[i].port != 0;
+		if (e->in_present[i] && bind_pin(e, &e->in_pins[i], p->in[i], input_name(i)))
+			return -1;
+	}
+	avr_irq_register_notify(e->step.irq, step_hook, e);
+	avr_irq_register_notify(e->dir.irq, dir_hook, e);
+	avr_irq_register_notify(e->torch.irq, torch_hook, e);
+	avr_irq_register_notify(e->ohmic_en.irq, ohmic_en_hook, e);
+	avr_irq_register_notify(e->z_en.irq, z_en_hook, e);
+	e->z_steps = (int64_t)p->z_boot_um * p->steps_per_mm / 1000;
+	e->last_raw_cycle = e->avr->cycle;
+	e->avr->data[MCUSR_ADDR] = MCUSR_PORF;
+	board_apply_inputs(e, 1);
+	return 0;
+}
+
+/* The model's (or the forced) level of each input, pushed onto the pins; force_all also
+ * rewrites the PIN bits (after a reset simavr clears them behind the pins' IRQ values). */
+void board_apply_inputs(struct emu *e, int force_all)
+{
+	uint64_t t = board_us(e);
+	plant_update(e, t);
+	double z = board_z_mm(e);
+	double surface = plant_surface_mm(e, t);
+	int model[IN_COUNT] = {0};
+	model[IN_ARC_OK] = e->arc.state == ARC_TRANSFERRED;
+	model[IN_FLOAT] = z <= surface - e->p.float_travel_mm + 1e-9;
+	model[IN_OHMIC] = z <= surface + 1e-9 && e->ohmic_en_level;
+	uint8_t mask[12] = {0}, value[12] = {0};
+	for (int i = 0; i < IN_COUNT; i++) {
+		if (!e->in_present[i])
+			continue;
+		int active = e->in_force[i] == FORCE_AUTO ? model[i] : e->in_force[i];
+		int pi = e->in_pins[i].port - 'A';
+		uint8_t bit = (uint8_t)(1u << e->in_pins[i].bit);
+		mask[pi] |= bit;
+		if (!active)
+			value[pi] |= bit; /* inactive = pulled up HIGH; active = pulled LOW */
+		if (active != e->in_level[i] || force_all) {
+			if (active != e->in_level[i])
+				record_event(e, "input", "%s,%d", input_name(i), active);
+			e->in_level[i] = active;
+		}
+	}
+	for (int pi = 0; pi < 12; pi++) {
+		if (!mask[pi])
+			continue;
+		avr_ioport_t *port = (avr_ioport_t *)e->ports[pi];
+		if (port->external.pull_mask != mask[pi] || port->external.pull_value != value[pi]) {
+			avr_ioport_external_t ext = {
+				.name = (unsigned long)('A' + pi), .mask = mask[pi], .value = value[pi]};
+			avr_ioctl(e->avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('A' + pi), &ext);
+		}
+		if (force_all)
+			e->avr->data[port->r_pin] =
+				(uint8_t)((e->avr->data[port->r_pin] & ~mask[pi]) | value[pi]);
+	}
+	for (int i = 0; i < IN_COUNT; i++) {
+		if (!e->in_present[i])
+			continue;
+		uint32_t level = e->in_level[i] ? 0u : 1u;
+		if (e->in_pins[i].irq->value != level || force_all)
+			avr_raise_irq(e->in_pins[i].irq, level);
+	}
+}
+
+void board_reset(struct emu *e, int power_on)
+{
+	uint64_t before = e->avr->cycle;
+	avr_reset(e->avr);
+	uint64_t after = e->avr->cycle;
+	e->cycle_base += before - after;
+	e->last_raw_cycle = after;
+	e->avr->state = cpu_Running;
+	e->avr->data[MCUSR_ADDR] = power_on ? MCUSR_PORF : MCUSR_EXTRF;
+	set_uart_flags(e);
+	e->reboots++;
+	record_event(e, "reboot", "%s", power_on ? "power_on" : "external_reset");
+	/* Pins are inputs after a reset: the relay driver, STEP and ENA- see no drive. */
+	avr_raise_irq(e->torch.irq, 0);
+	avr_raise_irq(e->ohmic_en.irq, 0);
+	avr_raise_irq(e->step.irq, 0);
+	avr_raise_irq(e->dir.irq, 0);
+	avr_raise_irq(e->z_en.irq, 0);
+	if (e->rx_len) {
+		record_event(e, "rx_dropped", "%zu,reset", e->rx_len);
+		e->rx_dropped += e->rx_len;
+	}
+	e->rx_len = e->rx_head = 0;
+	e->rx_frame.len = e->rx_frame.raw_len = 0;
+	e->tx_frame.len = e->tx_frame.raw_len = 0;
+	e->xoff = 0;
+	e->rx_next_cycle = board_cycles(e);
+	board_apply_inputs(e, 1);
+}
+
+/* Run the core until the absolute cycle count end_cycles (a sleeping core may pass it by a
+ * few cycles). Returns with e->avr->state telling whether the firmware still runs. */
+void board_run_until(struct emu *e, uint64_t end_cycles)
+{
+	avr_t *avr = e->avr;
+	wake_at(e, end_cycles, &wake_slice_tag);
+	for (;;) {
+		uint64_t raw = avr->cycle;
+		if (raw < e->last_raw_cycle) /* simavr restarted its counter (a watchdog reset) */
+			e->cycle_base += e->last_raw_cycle - raw;
+		e->last_raw_cycle = raw;
+		uint64_t now = e->cycle_base + raw;
+		if (now >= end_cycles)
+			break;
+		if (e->rx_len && now >= e->rx_next_cycle)
+			deliver_rx(e);
+		int state = avr_run(avr);
+		if (state != cpu_Running && state != cpu_Sleeping)
+			break;
+	}
+}

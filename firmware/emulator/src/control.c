@@ -1,0 +1,215 @@
+/* SPDX-License-Identifier: GPL-3.0-or-later */
+/*
+ * control.c - the control channel: one command per line on stdin, one reply line on
+ * stdout ("ok", a status line, or "error: ..."). stdin EOF only stops the reading.
+ *
+ *   set INPUT 1|0|auto     force an input active / inactive, or give it back to the model
+ *                          (arc_ok ohmic float breakaway thc_up thc_down estop z_limit_min
+ *                          z_limit_max; auto = the model: inactive for the switches)
+ *   plate MM               the plate's height
+ *   warp A_MM PERIOD_S     the plate's warp under the moving torch (0 0: flat)
+ *   model KEY VALUE        any model option by its command-line name (noise-v, cut-v, ...)
+ *   z MM                   put the carriage at Z (a hand on the axis; the firmware is not told)
+ *   status                 one line: sim time, Z, outputs, arc, inputs, counters
+ *   reboot                 as SIGUSR2: reset the MCU (external reset), Z kept
+ *   quit                   exit as on SIGTERM
+ */
+#include <errno.h>
+#include <math.h>
+#include <poll.h>
+#include <stddef.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "host.h"
+
+struct model_key {
+	const char *name;
+	size_t offset;
+};
+
+#define MK(n, f) {n, offsetof(struct model_params, f)}
+static const struct model_key model_keys[] = {
+	MK("plate-mm", plate_mm),
+	MK("warp-mm", warp_mm),
+	MK("warp-period-s", warp_period_s),
+	MK("arc-slope-v-mm", arc_slope_v_mm),
+	MK("cut-v", cut_v),
+	MK("cut-height-mm", cut_height_mm),
+	MK("noise-v", noise_v),
+	MK("arc-ok-delay-ms", arc_ok_delay_ms),
+	MK("ocv-v", ocv_v),
+	MK("transfer-max-mm", transfer_max_mm),
+	MK("lose-above-mm", lose_above_mm),
+	MK("pilot-timeout-ms", pilot_timeout_ms),
+	MK("float-travel-mm", float_travel_mm),
+};
+
+static int parse_double(const char *s, double *out)
+{
+	if (!s)
+		return -1;
+	char *end;
+	errno = 0;
+	double v = strtod(s, &end);
+	if (errno || end == s || *end || !isfinite(v))
+		return -1;
+	*out = v;
+	return 0;
+}
+
+void control_status(struct emu *e, char *buf, size_t n)
+{
+	uint64_t t = board_us(e);
+	int len = snprintf(
+		buf, n,
+		"status t_us=%llu wall_s=%.6f z_um=%lld plate_mm=%.4f surface_mm=%.4f torch=%d "
+		"ohmic_enable=%d z_enable_pin=%d arc=%s arc_v=%.2f inputs=",
+		(unsigned long long)t, mono_s() - e->wall_t0,
+		(long long)llround(board_z_mm(e) * 1000.0), e->p.plate_mm, plant_surface_mm(e, t),
+		e->torch_level, e->ohmic_en_level, e->z_en_level, plant_arc_name(e->arc.state),
+		e->arc.last_v);
+	const char *sep = "";
+	for (int i = 0; i < IN_COUNT && len > 0 && (size_t)len < n; i++) {
+		if (!e->in_present[i])
+			continue;
+		len += snprintf(buf + len, n - (size_t)len, "%s%s:%d%s", sep, input_name(i),
+				e->in_level[i], e->in_force[i] == FORCE_AUTO ? "" : "!");
+		sep = ",";
+	}
+	if (len > 0 && (size_t)len < n)
+		snprintf(buf + len, n - (size_t)len,
+			 " rx_bytes=%llu rx_dropped=%llu tx_bytes=%llu tx_dropped=%llu "
+			 "steps_ignored=%llu reboots=%llu max_lag_ms=%.1f",
+			 (unsigned long long)e->rx_bytes, (unsigned long long)e->rx_dropped,
+			 (unsigned long long)e->tx_bytes, (unsigned long long)e->tx_dropped,
+			 (unsigned long long)e->steps_ignored, (unsigned long long)e->reboots,
+			 e->max_lag_s * 1000.0);
+}
+
+static void reply(struct emu *e, const char *fmt, const char *arg)
+{
+	fprintf(e->out, fmt, arg);
+	fputc('\n', e->out);
+	fflush(e->out);
+}
+
+static void command(struct emu *e, char *line)
+{
+	char *argv[4] = {0};
+	int argc = 0;
+	for (char *tok = strtok(line, " \t\r"); tok && argc < 4; tok = strtok(NULL, " \t\r"))
+		argv[argc++] = tok;
+	if (argc == 0)
+		return;
+	const char *cmd = argv[0];
+	double a, b;
+	if (!strcmp(cmd, "set")) {
+		if (argc != 3) {
+			reply(e, "error: usage: set INPUT 1|0|auto%s", "");
+			return;
+		}
+		int which = -1;
+		for (int i = 0; i < IN_COUNT; i++)
+			if (!strcmp(argv[1], input_name(i)))
+				which = i;
+		if (which < 0) {
+			reply(e, "error: unknown input '%s'", argv[1]);
+			return;
+		}
+		if (!e->in_present[which]) {
+			reply(e, "error: this MCU's build has no %s input", argv[1]);
+			return;
+		}
+		if (!strcmp(argv[2], "1"))
+			e->in_force[which] = FORCE_ACTIVE;
+		else if (!strcmp(argv[2], "0"))
+			e->in_force[which] = FORCE_INACTIVE;
+		else if (!strcmp(argv[2], "auto"))
+			e->in_force[which] = FORCE_AUTO;
+		else {
+			reply(e, "error: set: level '%s' is not 1, 0 or auto", argv[2]);
+			return;
+		}
+		board_apply_inputs(e, 0);
+		reply(e, "ok%s", "");
+	} else if (!strcmp(cmd, "plate")) {
+		if (argc != 2 || parse_double(argv[1], &a)) {
+			reply(e, "error: usage: plate MM%s", "");
+			return;
+		}
+		e->p.plate_mm = a;
+		board_apply_inputs(e, 0);
+		reply(e, "ok%s", "");
+	} else if (!strcmp(cmd, "warp")) {
+		if (argc != 3 || parse_double(argv[1], &a) || parse_double(argv[2], &b) || b < 0) {
+			reply(e, "error: usage: warp A_MM PERIOD_S%s", "");
+			return;
+		}
+		e->p.warp_mm = a;
+		e->p.warp_period_s = b;
+		board_apply_inputs(e, 0);
+		reply(e, "ok%s", "");
+	} else if (!strcmp(cmd, "model")) {
+		if (argc != 3 || parse_double(argv[2], &a)) {
+			reply(e, "error: usage: model KEY VALUE%s", "");
+			return;
+		}
+		for (size_t i = 0; i < sizeof model_keys / sizeof model_keys[0]; i++) {
+			if (!strcmp(argv[1], model_keys[i].name)) {
+				*(double *)((char *)&e->p + model_keys[i].offset) = a;
+				board_apply_inputs(e, 0);
+				reply(e, "ok%s", "");
+				return;
+			}
+		}
+		reply(e, "error: unknown model key '%s'", argv[1]);
+	} else if (!strcmp(cmd, "z")) {
+		if (argc != 2 || parse_double(argv[1], &a)) {
+			reply(e, "error: usage: z MM%s", "");
+			return;
+		}
+		e->z_steps = llround(a * (double)e->pins->steps_per_mm);
+		record_event(e, "z_set", "%lld", (long long)llround(board_z_mm(e) * 1000.0));
+		board_apply_inputs(e, 0);
+		reply(e, "ok%s", "");
+	} else if (!strcmp(cmd, "status")) {
+		char buf[1024];
+		control_status(e, buf, sizeof buf);
+		reply(e, "%s", buf);
+	} else if (!strcmp(cmd, "reboot")) {
+		emu_reboot = 1;
+		reply(e, "ok%s", "");
+	} else if (!strcmp(cmd, "quit")) {
+		emu_stop = 1;
+		reply(e, "ok%s", "");
+	} else {
+		reply(e, "error: unknown command '%s'", cmd);
+	}
+}
+
+void control_poll(struct emu *e)
+{
+	if (e->ctl_eof)
+		return;
+	struct pollfd pfd = {.fd = 0, .events = POLLIN};
+	if (poll(&pfd, 1, 0) <= 0 || !(pfd.revents & (POLLIN | POLLHUP | POLLERR)))
+		return;
+	char buf[512];
+	ssize_t n = read(0, buf, sizeof buf);
+	if (n <= 0) {
+		if (n == 0 || (errno != EAGAIN && errno != EINTR))
+			e->ctl_eof = 1;
+		return;
+	}
+	for (ssize_t i = 0; i < n; i++) {
+		if (buf[i] == '\n') {
+			e->ctl_line[e->ctl_len] = 0;
+			command(e, e->ctl_line);
+			e->ctl_len = 0;
+		} else if (e->ctl_len + 1 < sizeof e->ctl_line) {
+			e->ctl_line[e->ctl_len++] = buf[i];
+		}
+	}
+}
