@@ -1,0 +1,469 @@
+/*
+ * hal_avr.c - firmware/hal/hal.h on the ATmega2560 (Arduino Mega) and ATmega328P (Nano).
+ *
+ * Timer1 (prescaler 8: 2 counts per us) runs free: its overflow extends it to the 64-bit
+ * microsecond clock, and its compare A schedules the sample tick on an exact grid
+ * (OCR1A += period). The tick runs board_tick with interrupts enabled (its own masked),
+ * so the UART and the step generator keep their timing under a long tick.
+ * Timer2 (CTC, 25 kHz) is the step generator: a 32-bit phase accumulator (DDA), one STEP
+ * pulse per carry, one period long; idle (interrupt off) while Z stands still.
+ * UART0 at DTHC_UART_BAUD: RX and TX ring buffers, both served by interrupts.
+ * The ADC converts continuously (restarted from its interrupt) and the tick takes the
+ * mean of the conversions since the previous tick.
+ */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+#include <util/atomic.h>
+
+#include "../../firmware_protocol/c/dthc_protocol.h"
+#include "../board/board.h"
+#include "../hal/hal.h"
+#include "hal_avr.h"
+#include "pins.h"
+
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+#define PORT_OF(n) CAT(PORT, n##_PORT)
+#define DDR_OF(n) CAT(DDR, n##_PORT)
+#define PINR_OF(n) CAT(PIN, n##_PORT)
+#define BIT_OF(n) _BV(n##_BIT)
+#define OUT_INIT(n) (DDR_OF(n) |= BIT_OF(n))
+#define OUT_SET(n, on) ((on) ? (PORT_OF(n) |= BIT_OF(n)) : (PORT_OF(n) &= (uint8_t)~BIT_OF(n)))
+#define IN_INIT(n) (DDR_OF(n) &= (uint8_t)~BIT_OF(n), PORT_OF(n) |= BIT_OF(n)) /* pull-up */
+#define IN_ACTIVE(n) ((PINR_OF(n) & BIT_OF(n)) ? 0u : 1u)                      /* active LOW */
+
+#if defined(__AVR_ATmega328P__)
+#define UART_RX_vect USART_RX_vect
+#define UART_UDRE_vect USART_UDRE_vect
+#else
+#define UART_RX_vect USART0_RX_vect
+#define UART_UDRE_vect USART0_UDRE_vect
+#endif
+
+/* --- UART rings (sizes: powers of two, set per MCU in the Makefile) ----------------------- */
+
+#ifndef HAL_RX_RING
+#define HAL_RX_RING 512 /* > a 300-byte burst at 1 Mbaud while the main loop is busy */
+#endif
+#ifndef HAL_TX_RING
+#define HAL_TX_RING 256
+#endif
+typedef char hal_rx_ring_pow2[(HAL_RX_RING & (HAL_RX_RING - 1)) == 0 ? 1 : -1];
+typedef char hal_tx_ring_pow2[(HAL_TX_RING & (HAL_TX_RING - 1)) == 0 ? 1 : -1];
+
+static uint8_t rx_ring[HAL_RX_RING];
+static volatile uint16_t rx_head; /* written by the RX interrupt */
+static uint16_t rx_tail;          /* written by the main loop */
+static uint8_t tx_ring[HAL_TX_RING];
+static uint16_t tx_head;          /* written by the producers (tick, locked main loop) */
+static volatile uint16_t tx_tail; /* written by the UDRE interrupt */
+volatile uint16_t hal_rx_overruns;
+
+ISR(UART_RX_vect)
+{
+    uint8_t b = UDR0;
+    uint16_t next = (uint16_t)((rx_head + 1u) & (HAL_RX_RING - 1u));
+    if (next == rx_tail) {
+        hal_rx_overruns++; /* the codec counts the damaged frame */
+        return;
+    }
+    rx_ring[rx_head] = b;
+    rx_head = next;
+}
+
+ISR(UART_UDRE_vect)
+{
+    uint16_t t = tx_tail;
+    if (t == tx_head) {
+        UCSR0B &= (uint8_t)~_BV(UDRIE0);
+        return;
+    }
+    UDR0 = tx_ring[t];
+    tx_tail = (uint16_t)((t + 1u) & (HAL_TX_RING - 1u));
+}
+
+int16_t hal_uart_getc(void)
+{
+    uint16_t head;
+    uint8_t b;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { head = rx_head; }
+    if (head == rx_tail) {
+        return -1;
+    }
+    b = rx_ring[rx_tail];
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { rx_tail = (uint16_t)((rx_tail + 1u) & (HAL_RX_RING - 1u)); }
+    return b;
+}
+
+bool hal_uart_rx_pending(void)
+{
+    uint16_t head;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { head = rx_head; }
+    return head != rx_tail;
+}
+
+uint16_t hal_uart_tx_free(void)
+{
+    uint16_t tail;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { tail = tx_tail; }
+    return (uint16_t)((tail - tx_head - 1u) & (HAL_TX_RING - 1u));
+}
+
+bool hal_uart_write(const uint8_t *data, uint16_t n)
+{
+    uint16_t h = tx_head;
+    if (n > hal_uart_tx_free()) {
+        return false;
+    }
+    while (n--) {
+        tx_ring[h] = *data++;
+        h = (uint16_t)((h + 1u) & (HAL_TX_RING - 1u));
+    }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        tx_head = h;
+        UCSR0B |= _BV(UDRIE0);
+    }
+    return true;
+}
+
+static void uart_init(void)
+{
+    /* Double speed: 16 MHz / (8 * 1 Mbaud) - 1 = 1, exact. */
+    uint16_t ubrr = (uint16_t)((F_CPU + 4UL * DTHC_UART_BAUD) / (8UL * DTHC_UART_BAUD) - 1UL);
+    UBRR0H = (uint8_t)(ubrr >> 8);
+    UBRR0L = (uint8_t)ubrr;
+    UCSR0A = _BV(U2X0);
+    UCSR0C = _BV(UCSZ01) | _BV(UCSZ00); /* 8N1 */
+    UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
+}
+
+/* --- time and the sample tick --------------------------------------------------------------- */
+
+static volatile uint32_t t1_overflows;
+static uint32_t tick_t_us;
+static uint16_t tick_period_us = 1000;
+static uint16_t tick_period_counts = 2000;
+
+ISR(TIMER1_OVF_vect)
+{
+    t1_overflows++;
+}
+
+/* Overflows and count read together; an overflow pending but not yet served counts. */
+static void clock_read(uint32_t *ovf, uint16_t *count)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        uint16_t c = TCNT1;
+        uint32_t o = t1_overflows;
+        if ((TIFR1 & _BV(TOV1)) && c < 0x8000u) {
+            o++;
+        }
+        *ovf = o;
+        *count = c;
+    }
+}
+
+uint32_t hal_time_us(void)
+{
+    uint32_t o;
+    uint16_t c;
+    clock_read(&o, &c);
+    return (o << 15) + (c >> 1);
+}
+
+uint64_t hal_time_us64(void)
+{
+    uint32_t o;
+    uint16_t c;
+    clock_read(&o, &c);
+    return ((uint64_t)o << 15) + (c >> 1);
+}
+
+void hal_tick_set_period_us(uint16_t period_us)
+{
+    tick_period_us = period_us;
+    tick_period_counts = (uint16_t)(period_us * 2u);
+}
+
+void hal_tick_lock(void)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { TIMSK1 &= (uint8_t)~_BV(OCIE1A); }
+}
+
+void hal_tick_unlock(void)
+{
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { TIMSK1 |= _BV(OCIE1A); }
+}
+
+volatile uint16_t hal_late_ticks;
+
+ISR(TIMER1_COMPA_vect)
+{
+    TIMSK1 &= (uint8_t)~_BV(OCIE1A); /* never re-entered */
+    for (;;) {
+        uint32_t t = tick_t_us;
+        tick_t_us += tick_period_us;
+        OCR1A += tick_period_counts;
+        sei();
+        board_tick(t);
+        cli();
+        TIFR1 = _BV(OCF1A); /* a match during the tick is the one just run, or the next: */
+        if ((int16_t)(TCNT1 - OCR1A) < 0) {
+            break; /* the next tick is still ahead: its match will fire */
+        }
+        hal_late_ticks++; /* behind by a period: run it now, with its scheduled time */
+    }
+    TIMSK1 |= _BV(OCIE1A);
+}
+
+static void timer1_init(void)
+{
+    TCCR1A = 0;
+    TCCR1B = _BV(CS11); /* normal mode, clk/8 */
+    TCNT1 = 0;
+    tick_t_us = (uint32_t)tick_period_us;
+    OCR1A = tick_period_counts;
+    TIFR1 = _BV(OCF1A) | _BV(TOV1);
+    TIMSK1 = _BV(TOIE1) | _BV(OCIE1A);
+}
+
+/* --- step generator ------------------------------------------------------------------------- */
+
+#define DDA_HZ 25000UL
+#define DDA_OCR (F_CPU / 8UL / DDA_HZ - 1UL)
+#define DDA_MAX_RATE ((int32_t)(DDA_HZ / 2UL - 1UL)) /* one pulse spans a DDA period */
+#define DDA_INC_PER_STEP_S 171799UL                  /* 2^32 / 25000, rounded */
+
+static volatile int32_t z_steps;
+static uint32_t dda_phase;
+static uint32_t dda_inc;
+static int32_t dda_lo;
+static int32_t dda_hi;
+static uint8_t dda_up;   /* wanted direction */
+static uint8_t dir_up;   /* the DIR pin now */
+
+ISR(TIMER2_COMPA_vect)
+{
+    uint32_t p;
+    OUT_SET(PIN_STEP, 0); /* ends the pulse of the previous period */
+    if (dda_up != dir_up) {
+        dir_up = dda_up;
+        OUT_SET(PIN_DIR, dir_up); /* DIR set a whole period before the next STEP edge */
+        return;
+    }
+    p = dda_phase + dda_inc;
+    if (p < dda_phase) {
+        if (dir_up) {
+            if (z_steps < dda_hi) {
+                z_steps++;
+                OUT_SET(PIN_STEP, 1);
+            }
+        } else if (z_steps > dda_lo) {
+            z_steps--;
+            OUT_SET(PIN_STEP, 1);
+        }
+    }
+    dda_phase = p;
+}
+
+void hal_z_drive(int32_t rate_steps_s, int32_t lo_steps, int32_t hi_steps)
+{
+    uint8_t up = rate_steps_s > 0;
+    uint32_t rate = (uint32_t)(up ? rate_steps_s : -rate_steps_s);
+    if (rate > (uint32_t)DDA_MAX_RATE) {
+        rate = (uint32_t)DDA_MAX_RATE;
+    }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        dda_inc = rate * DDA_INC_PER_STEP_S;
+        dda_lo = lo_steps;
+        dda_hi = hi_steps;
+        if (rate) {
+            dda_up = up;
+            TIMSK2 |= _BV(OCIE2A);
+        } else {
+            TIMSK2 &= (uint8_t)~_BV(OCIE2A); /* standing still: no 25 kHz interrupt */
+            OUT_SET(PIN_STEP, 0);
+        }
+    }
+}
+
+int32_t hal_z_steps(void)
+{
+    int32_t s;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { s = z_steps; }
+    return s;
+}
+
+static void timer2_init(void)
+{
+    TCCR2A = _BV(WGM21); /* CTC */
+    TCCR2B = _BV(CS21);  /* clk/8 */
+    OCR2A = (uint8_t)DDA_OCR;
+    TIMSK2 = 0;
+}
+
+/* --- ADC ------------------------------------------------------------------------------------ */
+
+#define ADC_MAX_SUM_N 64 /* 64 x 1023 x 25000 still fits 32 bits */
+static volatile uint16_t adc_sum;
+static volatile uint8_t adc_n;
+static uint16_t arc_last_cv;
+
+ISR(ADC_vect)
+{
+    uint16_t v = ADC;
+    if (adc_n < ADC_MAX_SUM_N) {
+        adc_sum += v;
+        adc_n++;
+    }
+    ADCSRA |= _BV(ADSC); /* next conversion */
+}
+
+uint16_t hal_arc_raw(void)
+{
+    uint16_t sum;
+    uint8_t n;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        sum = adc_sum;
+        n = adc_n;
+        adc_sum = 0;
+        adc_n = 0;
+    }
+    if (n) {
+        /* Arc centivolts = counts * Vref_mV * divider / 1024 / 10, from the mean. */
+        arc_last_cv = (uint16_t)(((uint32_t)sum * ((uint32_t)DTHC_ADC_REF_MV * DTHC_ARC_DIVIDER / 10u)
+                                  / n) >> 10);
+    }
+    return arc_last_cv;
+}
+
+static uint16_t adc_read_blocking(void)
+{
+    ADCSRA |= _BV(ADSC);
+    while (ADCSRA & _BV(ADSC)) {
+    }
+    return ADC;
+}
+
+static void adc_init(void)
+{
+    ADMUX = _BV(REFS0) | (PIN_ARC_ADC & 0x07); /* AVcc reference */
+#if defined(MUX5)
+    ADCSRB = (PIN_ARC_ADC & 0x08) ? _BV(MUX5) : 0;
+#endif
+    ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0); /* 125 kHz: ~9.6k conv/s */
+}
+
+static void adc_start(void)
+{
+    ADCSRA |= _BV(ADIE) | _BV(ADSC);
+}
+
+/* --- outputs and inputs ---------------------------------------------------------------------- */
+
+void hal_set_torch(bool on)
+{
+    OUT_SET(PIN_TORCH, on);
+}
+
+void hal_set_ohmic_enable(bool on)
+{
+    OUT_SET(PIN_OHMIC_ENABLE, on);
+}
+
+uint16_t hal_inputs(void)
+{
+    uint16_t in = (uint16_t)(IN_ACTIVE(PIN_ARC_OK) << DTHC_INPUT_ARC_OK);
+    in |= (uint16_t)(IN_ACTIVE(PIN_OHMIC) << DTHC_INPUT_OHMIC);
+    in |= (uint16_t)(IN_ACTIVE(PIN_FLOAT) << DTHC_INPUT_FLOAT);
+    in |= (uint16_t)(IN_ACTIVE(PIN_BREAKAWAY) << DTHC_INPUT_BREAKAWAY);
+    in |= (uint16_t)(IN_ACTIVE(PIN_ESTOP) << DTHC_INPUT_ESTOP);
+#if DTHC_HAS_THC_UPDOWN
+    in |= (uint16_t)(IN_ACTIVE(PIN_THC_UP) << DTHC_INPUT_THC_UP);
+    in |= (uint16_t)(IN_ACTIVE(PIN_THC_DOWN) << DTHC_INPUT_THC_DOWN);
+#endif
+#if DTHC_HAS_Z_LIMIT_INPUTS
+    in |= (uint16_t)(IN_ACTIVE(PIN_Z_LIMIT_MIN) << DTHC_INPUT_Z_LIMIT_MIN);
+    in |= (uint16_t)(IN_ACTIVE(PIN_Z_LIMIT_MAX) << DTHC_INPUT_Z_LIMIT_MAX);
+#endif
+    return in;
+}
+
+static void pins_init(void)
+{
+    /* Outputs first, all inactive: torch off, ohmic sensing off, Z driver enabled (LOW). */
+    OUT_SET(PIN_TORCH, 0);
+    OUT_SET(PIN_OHMIC_ENABLE, 0);
+    OUT_SET(PIN_STEP, 0);
+    OUT_SET(PIN_DIR, 0);
+    OUT_SET(PIN_Z_ENABLE, 0);
+    OUT_INIT(PIN_TORCH);
+    OUT_INIT(PIN_OHMIC_ENABLE);
+    OUT_INIT(PIN_STEP);
+    OUT_INIT(PIN_DIR);
+    OUT_INIT(PIN_Z_ENABLE);
+    IN_INIT(PIN_ARC_OK);
+    IN_INIT(PIN_OHMIC);
+    IN_INIT(PIN_FLOAT);
+    IN_INIT(PIN_BREAKAWAY);
+    IN_INIT(PIN_ESTOP);
+#if DTHC_HAS_THC_UPDOWN
+    IN_INIT(PIN_THC_UP);
+    IN_INIT(PIN_THC_DOWN);
+#endif
+#if DTHC_HAS_Z_LIMIT_INPUTS
+    IN_INIT(PIN_Z_LIMIT_MIN);
+    IN_INIT(PIN_Z_LIMIT_MAX);
+#endif
+}
+
+/* --- entropy --------------------------------------------------------------------------------- */
+
+/* Survive a reset (not a power cycle): a start counter and whatever RAM held at power-on. */
+static uint32_t noinit_pool[4] __attribute__((section(".noinit")));
+
+static uint32_t mix32(uint32_t h, uint32_t v)
+{
+    h ^= v;
+    h *= 0x01000193UL; /* FNV-style step, then a murmur finaliser at the end */
+    h ^= h >> 15;
+    return h;
+}
+
+uint32_t hal_entropy32(void)
+{
+    uint32_t h = 0x811C9DC5UL;
+    uint8_t i;
+    noinit_pool[0]++;
+    for (i = 0; i < 4; i++) {
+        h = mix32(h, noinit_pool[i]);
+    }
+    for (i = 0; i < 32; i++) {
+        h = mix32(h, (uint32_t)adc_read_blocking() ^ ((uint32_t)TCNT1 << 16) ^ TCNT2);
+    }
+    h ^= h >> 16;
+    h *= 0x85EBCA6BUL;
+    h ^= h >> 13;
+    noinit_pool[1] ^= h; /* the next start sees this one's result too */
+    return h;
+}
+
+/* --- start ------------------------------------------------------------------------------------ */
+
+void hal_init(void)
+{
+    pins_init();
+    uart_init();
+    adc_init();
+    timer2_init();
+}
+
+void hal_start(void)
+{
+    timer1_init();
+    adc_start();
+}

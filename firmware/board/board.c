@@ -1,0 +1,416 @@
+/*
+ * board.c - the sample tick (inputs, EVENTs, lease, faults, samples) and shared helpers.
+ * Everything here that the tick calls runs in interrupt context on a real MCU: no float,
+ * no waiting; a report that does not fit the transmit ring is dropped (and counted by the
+ * host through its counter or stream_seq).
+ */
+#include "board_internal.h"
+
+#include <string.h>
+
+board_t B;
+uint8_t board_small_tx[BOARD_SMALL_TX];
+static uint8_t samples_tx[BOARD_SAMPLES_TX];
+#define SAMPLES_AT (samples_tx + DTHC_TX_PAYLOAD_OFFSET)
+
+/* --- sending from the tick (or from the main loop with the tick locked) ---------------- */
+
+void board_send_small(uint8_t type, uint8_t seq, uint8_t len)
+{
+    size_t n = dthc_encode_frame(type, seq, BOARD_SMALL_PAYLOAD_AT, len, board_small_tx,
+                                 sizeof board_small_tx);
+    (void)hal_uart_write(board_small_tx, (uint16_t)n);
+}
+
+/* --- outputs ---------------------------------------------------------------------------- */
+
+void board_set_torch(bool on)
+{
+    B.torch = on;
+    hal_set_torch(on);
+    B.arc_ok_seen = false; /* ARC_LOST needs arc OK seen since this switch-on */
+    B.arc_off_timing = false;
+}
+
+void board_set_ohmic(bool on)
+{
+    B.ohmic = on;
+    hal_set_ohmic_enable(on);
+}
+
+uint8_t board_status_bits(void)
+{
+    uint8_t s = 0;
+    if (B.torch) {
+        s |= DTHC_STATUS_TORCH_ON;
+    }
+    if (B.ohmic) {
+        s |= DTHC_STATUS_OHMIC_SENSE;
+    }
+    if (B.faults) {
+        s |= DTHC_STATUS_FAULT_LATCHED;
+    }
+    if (board_z_busy()) {
+        s |= DTHC_STATUS_Z_BUSY;
+    }
+    if (B.sample_overflow) {
+        s |= DTHC_STATUS_SAMPLE_OVERFLOW;
+    }
+    if (B.session) {
+        s |= DTHC_STATUS_SESSION;
+    }
+    return s;
+}
+
+uint8_t board_lowest_fault(void)
+{
+    uint8_t code = 0;
+    while (code < 15 && !(B.faults & (1u << code))) {
+        code++;
+    }
+    return code;
+}
+
+/* --- faults ----------------------------------------------------------------------------- */
+
+static void send_fault(uint8_t code, uint8_t detail)
+{
+    uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
+    B.last_fault_report_us = B.now_us;
+    dthc_put_u32(p, B.fault_counter[code]);
+    dthc_put_u32(p + 4, B.now_us);
+    p[8] = code;
+    p[9] = detail;
+    dthc_put_u16(p + 10, B.faults);
+    dthc_put_i32(p + 12, board_z_um());
+    board_send_small(DTHC_MSG_FAULT, 0, 16);
+}
+
+/* Latch a fault (tick context): torch and ohmic sensing off, motion ended and Z
+ * decelerated to a stop, FAULT sent with the next event counter. */
+void board_latch(uint8_t code, uint8_t detail)
+{
+    if (B.faults & (1u << code)) {
+        return;
+    }
+    B.faults = (uint16_t)(B.faults | (1u << code));
+    if (B.torch) {
+        board_set_torch(false);
+    }
+    if (B.ohmic) {
+        board_set_ohmic(false);
+    }
+    board_z_end(DTHC_MOTION_FAULT, DTHC_PROBE_ABORTED);
+    board_z_stop();
+    B.event_counter++;
+    B.fault_counter[code] = B.event_counter;
+    B.fault_detail[code] = detail;
+    send_fault(code, detail);
+}
+
+/* --- inputs and safety -------------------------------------------------------------------- */
+
+static void read_inputs(void)
+{
+    uint16_t now = hal_inputs();
+    uint16_t changed;
+    uint8_t bit;
+    if (!B.ohmic) {
+        now = (uint16_t)(now & ~(1u << DTHC_INPUT_OHMIC)); /* contact only while sensing */
+    }
+    changed = (uint16_t)(now ^ B.inputs);
+    B.inputs = now;
+    for (bit = 0; changed; bit++, changed >>= 1) {
+        uint8_t *p;
+        if (!(changed & 1u)) {
+            continue;
+        }
+        /* One EVENT per edge, raw: the host debounces. */
+        p = BOARD_SMALL_PAYLOAD_AT;
+        B.event_counter++;
+        dthc_put_u32(p, B.event_counter);
+        dthc_put_u32(p + 4, B.now_us);
+        p[8] = bit;
+        p[9] = (uint8_t)((now >> bit) & 1u);
+        dthc_put_u16(p + 10, now);
+        dthc_put_i32(p + 12, board_z_um());
+        board_send_small(DTHC_MSG_EVENT, 0, 16);
+    }
+}
+
+static void check_safety(void)
+{
+    uint16_t in = B.inputs;
+    if (B.session && !B.lease_expired
+        && (int32_t)(B.now_us - B.last_rx_us) > (int32_t)B.lease_ms * 1000) {
+        B.lease_expired = true;
+        board_latch(DTHC_FAULT_LEASE_EXPIRED, 0);
+    }
+    if (in & (1u << DTHC_INPUT_BREAKAWAY)) {
+        board_latch(DTHC_FAULT_BREAKAWAY, 0);
+    }
+    if (in & (1u << DTHC_INPUT_ESTOP)) {
+        board_latch(DTHC_FAULT_ESTOP, 0);
+    }
+    /* A limit switch stops motion towards it at once (the step generator's bounds) and
+     * latches Z_LIMIT when Z was driven into it. */
+    if ((in & (1u << DTHC_INPUT_Z_LIMIT_MIN)) && B.z_v_um_s < 0) {
+        board_latch(DTHC_FAULT_Z_LIMIT, 0);
+    }
+    if ((in & (1u << DTHC_INPUT_Z_LIMIT_MAX)) && B.z_v_um_s > 0) {
+        board_latch(DTHC_FAULT_Z_LIMIT, 1);
+    }
+    if (B.torch && B.arc_lost_ms) {
+        if (in & (1u << DTHC_INPUT_ARC_OK)) {
+            B.arc_ok_seen = true;
+            B.arc_off_timing = false;
+        } else if (B.arc_ok_seen) {
+            if (!B.arc_off_timing) {
+                B.arc_off_timing = true;
+                B.arc_off_since_us = B.now_us;
+            } else if ((uint32_t)(B.now_us - B.arc_off_since_us)
+                       >= (uint32_t)B.arc_lost_ms * 1000u) {
+                board_latch(DTHC_FAULT_ARC_LOST, 0);
+            }
+        }
+    }
+}
+
+static void report_faults(void)
+{
+    uint8_t code;
+    for (code = 0; code < BOARD_FAULT_CODES; code++) {
+        if (B.faults & (1u << code)) {
+            send_fault(code, B.fault_detail[code]); /* the counter that latched it */
+        }
+    }
+}
+
+/* --- sampling ------------------------------------------------------------------------------ */
+
+static int32_t calibrate(uint16_t raw)
+{
+    int64_t diff = (int64_t)raw - B.cal_offset;
+    int64_t p;
+    /* Beyond 2^24 counts every result saturates anyway; keeps the product in 64 bits. */
+    if (diff > (1L << 24)) {
+        diff = 1L << 24;
+    } else if (diff < -(1L << 24)) {
+        diff = -(1L << 24);
+    }
+    p = diff * (int64_t)B.scale_m;
+    if (B.scale_sh) {
+        p = (p + ((int64_t)1 << (B.scale_sh - 1))) >> B.scale_sh;
+    }
+    if (p > 0x7FFFFFFFL) {
+        p = 0x7FFFFFFFL;
+    } else if (p < -0x7FFFFFFFL) {
+        p = -0x7FFFFFFFL;
+    }
+    return (int32_t)p;
+}
+
+static int32_t filter(int32_t cv)
+{
+    switch (B.filter_kind) {
+    case DTHC_FILTER_MOVING_AVERAGE: {
+        uint8_t window = (uint8_t)B.filter_param;
+        if (B.hist_len == window) {
+            B.hist_sum -= B.hist[B.hist_pos];
+        } else {
+            B.hist_len++;
+        }
+        B.hist[B.hist_pos] = cv;
+        B.hist_sum += cv;
+        B.hist_pos = (uint8_t)((B.hist_pos + 1u) % window);
+        return B.hist_sum / (int32_t)B.hist_len;
+    }
+    case DTHC_FILTER_MEDIAN3: {
+        int32_t a, b, c;
+        B.hist[B.hist_pos] = cv;
+        B.hist_pos = (uint8_t)((B.hist_pos + 1u) % 3u);
+        if (B.hist_len < 3) {
+            B.hist_len++;
+        }
+        if (B.hist_len == 1) {
+            return cv;
+        }
+        if (B.hist_len == 2) { /* the median of two values is their mean */
+            return (B.hist[0] + B.hist[1]) / 2;
+        }
+        a = B.hist[0];
+        b = B.hist[1];
+        c = B.hist[2];
+        if ((a <= b && b <= c) || (c <= b && b <= a)) {
+            return b;
+        }
+        if ((b <= a && a <= c) || (c <= a && a <= b)) {
+            return a;
+        }
+        return c;
+    }
+    case DTHC_FILTER_LOW_PASS: {
+        int32_t x = cv * 256;
+        if (!B.hist_len) {
+            B.hist_len = 1;
+            B.lp_q8 = x;
+        } else {
+            B.lp_q8 += (int32_t)(((int64_t)(x - B.lp_q8) * B.lp_alpha_q16) >> 16);
+        }
+        return (B.lp_q8 + 128) >> 8;
+    }
+    default:
+        return cv;
+    }
+}
+
+static void send_batch(void)
+{
+    uint8_t *p = SAMPLES_AT;
+    uint8_t len = (uint8_t)(DTHC_SAMPLES_HEADER_SIZE + 2u * B.n_batch);
+    size_t n;
+    dthc_put_u16(p, B.sample_seq);
+    dthc_put_u32(p + 2, B.batch_t0_us);
+    dthc_put_u16(p + 6, B.period_us);
+    dthc_put_i32(p + 8, board_z_um());
+    dthc_put_u16(p + 12, B.inputs);
+    dthc_put_u16(p + 14, B.zvel_seq);
+    dthc_put_u16(p + 16, DTHC_XY_SPEED_UNKNOWN);
+    p[18] = board_status_bits();
+    n = dthc_encode_frame(DTHC_MSG_SAMPLES, 0, p, len, samples_tx, sizeof samples_tx);
+    /* A batch that does not fit is lost: the host sees the stream_seq gap, and the next
+     * batch says SAMPLE_OVERFLOW. */
+    B.sample_overflow = !hal_uart_write(samples_tx, (uint16_t)n);
+    B.sample_seq++;
+    B.n_batch = 0;
+}
+
+static void sample(void)
+{
+    int32_t cv = filter(calibrate(hal_arc_raw()));
+    if (cv < 0) {
+        cv = 0;
+    } else if (cv > 0xFFFF) {
+        cv = 0xFFFF;
+    }
+    if (!B.n_batch) {
+        B.batch_t0_us = B.now_us;
+    }
+    dthc_put_u16(SAMPLES_AT + DTHC_SAMPLES_HEADER_SIZE + 2u * B.n_batch, (uint16_t)cv);
+    B.n_batch++;
+    if (B.n_batch >= B.batch_size) {
+        send_batch();
+    }
+}
+
+/* --- CONFIGURE (main loop, tick locked: the float arithmetic stays out of the tick) ------ */
+
+static bool set_scale(float scale)
+{
+    float x = scale * 100.0f; /* volts per count -> centivolts per count */
+    int sh = 0;
+    if (!(scale > 0.0f) || scale > 3.0e38f) {
+        return false; /* not positive, NaN or infinite */
+    }
+    while (x < 8388608.0f && sh < 62) { /* mantissa into [2^23, 2^24) */
+        x *= 2.0f;
+        sh++;
+    }
+    while (x >= 16777216.0f && sh > 0) {
+        x *= 0.5f;
+        sh--;
+    }
+    if (x >= 16777216.0f) {
+        x = 16777215.0f; /* >= 2^24 cV per count: every non-zero reading saturates */
+    }
+    B.scale_m = (uint32_t)(x + 0.5f);
+    B.scale_sh = (uint8_t)sh;
+    return true;
+}
+
+bool board_configure(const uint8_t *p, uint8_t *bad_field)
+{
+    uint16_t rate = dthc_get_u16(p);
+    uint8_t batch = p[2];
+    uint8_t kind = p[3];
+    uint16_t param = dthc_get_u16(p + 4);
+    uint16_t arc_lost = dthc_get_u16(p + 6);
+    int32_t offset = dthc_get_i32(p + 8);
+    uint32_t bits = dthc_get_u32(p + 12);
+    float scale;
+    uint32_t saved_m = B.scale_m;
+    uint8_t saved_sh = B.scale_sh;
+    memcpy(&scale, &bits, sizeof scale);
+    *bad_field = 0xFF;
+    if (rate < DTHC_SAMPLE_RATE_MIN_HZ || rate > BOARD_MAX_RATE_HZ) {
+        *bad_field = 0;
+    } else if (batch < 1 || batch > BOARD_MAX_BATCH) {
+        *bad_field = 1;
+    } else if (kind > DTHC_FILTER_MEDIAN3) {
+        *bad_field = 2;
+    } else if ((kind == DTHC_FILTER_MOVING_AVERAGE && (param < 1 || param > BOARD_MA_MAX))
+               || (kind == DTHC_FILTER_LOW_PASS && (param < 1 || param > DTHC_LOW_PASS_MAX_HZ))) {
+        *bad_field = 3;
+    } else if (arc_lost > DTHC_ARC_LOST_MAX_MS) {
+        *bad_field = 4;
+    } else if (!set_scale(scale)) {
+        *bad_field = 6;
+    }
+    if (*bad_field != 0xFF) {
+        B.scale_m = saved_m; /* nothing applied */
+        B.scale_sh = saved_sh;
+        return false;
+    }
+    B.rate_hz = rate;
+    B.period_us = (uint16_t)(1000000UL / rate);
+    B.batch_size = batch;
+    B.filter_kind = kind;
+    B.filter_param = param;
+    B.arc_lost_ms = arc_lost;
+    B.cal_offset = offset;
+    if (kind == DTHC_FILTER_LOW_PASS) {
+        /* First order: alpha = dt / (RC + dt), RC = 1 / (2 pi fc). */
+        float dt = (float)B.period_us * 1e-6f;
+        float rc = 1.0f / (6.2831853f * (float)param);
+        B.lp_alpha_q16 = (uint16_t)(dt / (rc + dt) * 65535.0f + 0.5f);
+    }
+    B.hist_len = 0;
+    B.hist_pos = 0;
+    B.hist_sum = 0;
+    B.n_batch = 0; /* a partial batch is dropped, as the mock board does */
+    hal_tick_set_period_us(B.period_us);
+    board_z_update_dv();
+    return true;
+}
+
+/* --- entry points ----------------------------------------------------------------------- */
+
+void board_init(const board_config_t *cfg, uint32_t entropy)
+{
+    memset(&B, 0, sizeof B);
+    B.cfg = cfg;
+    B.boot_id = entropy;
+    B.lease_ms = DTHC_DEFAULT_LEASE_MS;
+    B.rate_hz = DTHC_DEFAULT_SAMPLE_RATE_HZ;
+    B.period_us = (uint16_t)(1000000UL / DTHC_DEFAULT_SAMPLE_RATE_HZ);
+    B.batch_size = DTHC_DEFAULT_BATCH_SIZE;
+    B.filter_kind = DTHC_FILTER_NONE;
+    (void)set_scale(0.01f); /* raw is nominal centivolts: the host's default 0.01 V/count */
+    dthc_rx_init(&board_rx);
+    hal_set_torch(false);
+    hal_set_ohmic_enable(false);
+    hal_tick_set_period_us(B.period_us);
+    board_z_init();
+}
+
+void board_tick(uint32_t t_us)
+{
+    B.now_us = t_us;
+    read_inputs();
+    check_safety();
+    board_z_tick();
+    sample();
+    if (B.faults && (uint32_t)(B.now_us - B.last_fault_report_us) >= BOARD_FAULT_REPEAT_US) {
+        report_faults();
+    }
+}

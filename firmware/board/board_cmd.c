@@ -1,0 +1,408 @@
+/*
+ * board_cmd.c - the main loop's side: received frames, the session, the duplicate memory,
+ * every host command and its reply.
+ *
+ * A command runs with the tick locked (it changes what the tick reads), and its ACK or
+ * NAK is queued before the lock is released, so a report the command causes (a
+ * MOTION_DONE, a PROBE_RESULT) always follows the command's reply on the wire. Query
+ * replies are snapshotted under the lock and encoded after it: a long encode never holds
+ * up the tick.
+ */
+#include "board_internal.h"
+
+#include <string.h>
+
+dthc_rx_t board_rx;
+static uint8_t query_tx[BOARD_QUERY_TX];
+#define QUERY_AT (query_tx + DTHC_TX_PAYLOAD_OFFSET)
+
+#define POLL_BYTES_MAX 64 /* per board_poll call, so the main loop kicks the watchdog */
+
+/* Boot id: the start's entropy, stirred once with the arrival time of the first host
+ * frame (host timing differs from start to start even where the MCU is deterministic). */
+static void finalise_boot_id(void)
+{
+    uint32_t h;
+    if (B.boot_id_final) {
+        return;
+    }
+    h = B.boot_id ^ (hal_time_us() * 0x9E3779B1UL);
+    h ^= h >> 16;
+    h *= 0x85EBCA6BUL;
+    h ^= h >> 13;
+    h *= 0xC2B2AE35UL;
+    h ^= h >> 16;
+    if (h == 0 || h == 0xFFFFFFFFUL) {
+        h = 0x5EED0001UL; /* the two values a host takes for a constant */
+    }
+    B.boot_id = h;
+    B.boot_id_final = true;
+}
+
+/* --- replies ----------------------------------------------------------------------------- */
+
+/* ACK (code 0) or NAK, queued now (tick locked). */
+static void send_outcome(uint8_t seq, uint8_t code, uint8_t detail)
+{
+    uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
+    dthc_put_u32(p, B.boot_id);
+    if (!code) {
+        board_send_small(DTHC_MSG_ACK, seq, 4);
+        return;
+    }
+    p[4] = code;
+    p[5] = detail;
+    board_send_small(DTHC_MSG_NAK, seq, 6);
+}
+
+/* The reply of an executed command, remembered for its duplicates. */
+static void reply(uint8_t seq, uint8_t code, uint8_t detail)
+{
+    outcome_t *o;
+    send_outcome(seq, code, detail);
+    if (!seq) {
+        return; /* seq 0 is never a sequenced command's: nothing to recognise later */
+    }
+    o = &B.outcomes[B.outcome_next];
+    o->seq = seq;
+    o->code = code;
+    o->detail = detail;
+    B.outcome_next = (uint8_t)((B.outcome_next + 1u) % BOARD_OUTCOMES);
+}
+
+static const outcome_t *remembered(uint8_t seq)
+{
+    uint8_t i;
+    for (i = 0; i < BOARD_OUTCOMES; i++) {
+        if (seq && B.outcomes[i].seq == seq) {
+            return &B.outcomes[i];
+        }
+    }
+    return NULL;
+}
+
+static uint8_t hello_info(void)
+{
+    uint8_t *p = QUERY_AT;
+    const board_config_t *c = B.cfg;
+    size_t n = strlen(c->serial);
+    p[0] = DTHC_PROTOCOL_MAJOR;
+    p[1] = DTHC_PROTOCOL_MINOR;
+    p[2] = BOARD_FW_MAJOR;
+    p[3] = BOARD_FW_MINOR;
+    p[4] = BOARD_FW_PATCH;
+    p[5] = c->reset_reason;
+    dthc_put_u32(p + 6, B.boot_id);
+    memset(p + 10, 0, DTHC_SERIAL_LEN);
+    memcpy(p + 10, c->serial, n > DTHC_SERIAL_LEN ? DTHC_SERIAL_LEN : n);
+    dthc_put_u16(p + 26, B.rate_hz);
+    p[28] = B.batch_size;
+    dthc_put_u32(p + 29, c->capabilities);
+    dthc_put_i32(p + 33, c->z_min_um);
+    dthc_put_i32(p + 37, c->z_max_um);
+    dthc_put_u16(p + 41, DTHC_MAX_FRAME);
+    dthc_put_u16(p + 43, B.lease_ms);
+    return 45;
+}
+
+static uint16_t sat16(uint32_t v)
+{
+    return v > 0xFFFFu ? 0xFFFFu : (uint16_t)v;
+}
+
+static uint8_t status(void)
+{
+    uint8_t *p = QUERY_AT;
+    dthc_put_u32(p, B.boot_id);
+    dthc_put_u32(p + 4, hal_time_us());
+    dthc_put_u16(p + 8, B.faults);
+    dthc_put_u16(p + 10, B.inputs);
+    p[12] = board_status_bits();
+    dthc_put_u16(p + 13, B.lease_ms);
+    dthc_put_u32(p + 15, B.event_counter);
+    dthc_put_u16(p + 19, B.sample_seq);
+    dthc_put_u16(p + 21, B.zvel_seq);
+    dthc_put_i32(p + 23, board_z_um());
+    dthc_put_u16(p + 27, 0); /* current_da: no CURRENT_OUT */
+    dthc_put_u16(p + 29, sat16(board_rx.crc_errors));
+    dthc_put_u16(p + 31, sat16(board_rx.framing_errors));
+    dthc_put_u16(p + 33, B.rx_duplicates);
+    return 35;
+}
+
+/* Encode a query reply outside the lock, queue it inside (dropped if the ring stays full:
+ * the host asks again). */
+static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
+{
+    size_t n;
+    uint16_t spins = 0;
+    hal_tick_unlock();
+    n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
+    while (hal_uart_tx_free() < n && ++spins) {
+        /* the transmit interrupt drains the ring; the tick keeps running */
+    }
+    hal_tick_lock();
+    (void)hal_uart_write(query_tx, (uint16_t)n);
+}
+
+/* --- commands (tick locked) --------------------------------------------------------------- */
+
+static void cmd_hello(uint8_t seq, const uint8_t *p)
+{
+    send_query_reply(DTHC_MSG_HELLO_INFO, seq, hello_info());
+    if (p[0] != DTHC_PROTOCOL_MAJOR) {
+        B.session = false; /* the host can read what the board speaks, and stops there */
+        return;
+    }
+    B.session = true;
+    memset(B.outcomes, 0, sizeof B.outcomes);
+    B.outcome_next = 0;
+    B.zvel_applied = false; /* the velocity stream restarts with each session */
+    B.last_rx_us = hal_time_us();
+}
+
+static void cmd_query(uint8_t seq, uint8_t what)
+{
+    if (what == DTHC_QUERY_STATUS) {
+        send_query_reply(DTHC_MSG_STATUS, seq, status());
+    } else if (what == DTHC_QUERY_HELLO_INFO) {
+        send_query_reply(DTHC_MSG_HELLO_INFO, seq, hello_info());
+    } else if (what == DTHC_QUERY_PROBE_RESULT && B.last_probe.valid) {
+        uint8_t ended = B.last_probe.seq;
+        B.last_probe.seq = seq; /* answered with the query's seq (section 3) */
+        board_send_probe_result();
+        B.last_probe.seq = ended;
+    } else if (what == DTHC_QUERY_MOTION_DONE && B.last_motion.valid) {
+        uint8_t ended = B.last_motion.seq;
+        B.last_motion.seq = seq;
+        board_send_motion_done();
+        B.last_motion.seq = ended;
+    } else {
+        send_outcome(seq, DTHC_NAK_OUT_OF_RANGE, 0);
+    }
+}
+
+static void cmd_z_velocity(const uint8_t *p)
+{
+    uint16_t stream_seq = dthc_get_u16(p);
+    uint16_t expiry_ms = dthc_get_u16(p + 6);
+    uint16_t delta = (uint16_t)(stream_seq - B.zvel_seq);
+    if (!B.session || B.faults) {
+        return;
+    }
+    if (B.zvel_applied && (delta == 0 || delta > DTHC_STREAM_SEQ_NEWER_MAX)) {
+        return; /* not newer than the last applied one: late or duplicated */
+    }
+    if (expiry_ms < DTHC_ZVEL_EXPIRY_MIN_MS || expiry_ms > DTHC_ZVEL_EXPIRY_MAX_MS) {
+        return;
+    }
+    B.zvel_seq = stream_seq;
+    B.zvel_applied = true;
+    board_z_velocity(dthc_get_i32(p + 2), expiry_ms);
+}
+
+static void cmd_z_move(uint8_t seq, const uint8_t *p)
+{
+    int32_t target = dthc_get_i32(p);
+    uint32_t feed = dthc_get_u32(p + 4);
+    if (target < B.cfg->z_min_um || target > B.cfg->z_max_um) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
+    } else if (feed == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 1);
+    } else if (B.faults && target <= board_z_um()) {
+        reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault()); /* only up while latched */
+    } else {
+        reply(seq, 0, 0);
+        board_z_move(seq, target, feed);
+    }
+}
+
+static void cmd_z_probe(uint8_t seq, const uint8_t *p)
+{
+    uint32_t feed = dthc_get_u32(p);
+    uint32_t travel = dthc_get_u32(p + 4);
+    uint16_t sensors = (uint16_t)(dthc_get_u16(p + 8) & BOARD_CONTACT_SENSORS);
+    if (B.faults) {
+        reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault());
+    } else if (feed == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
+    } else if (travel == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 1);
+    } else if (!sensors) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 2);
+    } else {
+        reply(seq, 0, 0);
+        board_z_probe(seq, feed, travel, sensors);
+    }
+}
+
+static void cmd_fault_reset(uint8_t seq, uint16_t mask)
+{
+    uint8_t code;
+    mask &= B.faults;
+    if ((mask & (1u << DTHC_FAULT_BREAKAWAY)) && (B.inputs & (1u << DTHC_INPUT_BREAKAWAY))) {
+        reply(seq, DTHC_NAK_FAULT_ACTIVE, DTHC_FAULT_BREAKAWAY);
+        return;
+    }
+    if ((mask & (1u << DTHC_FAULT_ESTOP)) && (B.inputs & (1u << DTHC_INPUT_ESTOP))) {
+        reply(seq, DTHC_NAK_FAULT_ACTIVE, DTHC_FAULT_ESTOP);
+        return;
+    }
+    if (mask & (1u << DTHC_FAULT_Z_LIMIT)) {
+        int32_t z = board_z_um();
+        if (z < B.cfg->z_min_um || z > B.cfg->z_max_um) {
+            reply(seq, DTHC_NAK_FAULT_ACTIVE, DTHC_FAULT_Z_LIMIT);
+            return;
+        }
+    }
+    B.faults = (uint16_t)(B.faults & ~mask);
+    for (code = 0; code < BOARD_FAULT_CODES; code++) {
+        if (mask & (1u << code)) {
+            B.fault_counter[code] = 0;
+        }
+    }
+    if (mask & (1u << DTHC_FAULT_LEASE_EXPIRED)) {
+        B.lease_expired = false; /* re-armed explicitly, from now */
+        B.last_rx_us = hal_time_us();
+    }
+    reply(seq, 0, 0);
+}
+
+static void command(uint8_t type, uint8_t seq, const uint8_t *p)
+{
+    switch (type) {
+    case DTHC_MSG_HEARTBEAT:
+        reply(seq, 0, 0);
+        break;
+    case DTHC_MSG_SET_LEASE: {
+        uint16_t lease = dthc_get_u16(p);
+        if (lease < DTHC_LEASE_MIN_MS || lease > DTHC_LEASE_MAX_MS) {
+            reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
+        } else {
+            B.lease_ms = lease;
+            reply(seq, 0, 0);
+        }
+        break;
+    }
+    case DTHC_MSG_TORCH:
+        if (p[0] && B.faults) {
+            reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault());
+        } else {
+            board_set_torch(p[0] != 0);
+            reply(seq, 0, 0);
+        }
+        break;
+    case DTHC_MSG_OHMIC_SENSE:
+        board_set_ohmic(p[0] != 0);
+        reply(seq, 0, 0);
+        break;
+    case DTHC_MSG_Z_MOVE:
+        cmd_z_move(seq, p);
+        break;
+    case DTHC_MSG_Z_PROBE:
+        cmd_z_probe(seq, p);
+        break;
+    case DTHC_MSG_Z_STOP:
+        board_z_end(DTHC_MOTION_STOPPED, DTHC_PROBE_ABORTED);
+        board_z_stop();
+        reply(seq, 0, 0);
+        break;
+    case DTHC_MSG_SET_CURRENT: /* no CURRENT_OUT on this board */
+        reply(seq, DTHC_NAK_UNSUPPORTED, 5);
+        break;
+    case DTHC_MSG_CONFIGURE: {
+        uint8_t bad;
+        if (board_configure(p, &bad)) {
+            reply(seq, 0, 0);
+        } else {
+            reply(seq, DTHC_NAK_OUT_OF_RANGE, bad);
+        }
+        break;
+    }
+    case DTHC_MSG_FAULT_RESET:
+        cmd_fault_reset(seq, dthc_get_u16(p));
+        break;
+    default: /* a board-to-host type sent to the board */
+        reply(seq, DTHC_NAK_UNKNOWN_TYPE, 0);
+        break;
+    }
+}
+
+static void renew_lease(void)
+{
+    if (B.session && !B.lease_expired) {
+        B.last_rx_us = hal_time_us();
+    }
+}
+
+static void frame(const dthc_frame_t *f)
+{
+    const outcome_t *dup;
+    renew_lease();
+    switch (f->type) {
+    case DTHC_MSG_HELLO:
+        cmd_hello(f->seq, f->payload);
+        return;
+    case DTHC_MSG_QUERY:
+        cmd_query(f->seq, f->payload[0]);
+        return;
+    case DTHC_MSG_CLOCK_QUERY:
+        dthc_put_u64(QUERY_AT, hal_time_us64());
+        send_query_reply(DTHC_MSG_CLOCK, f->seq, 8);
+        return;
+    case DTHC_MSG_Z_VELOCITY:
+        cmd_z_velocity(f->payload);
+        return;
+    default:
+        break;
+    }
+    if (!B.session) {
+        if (f->seq) {
+            send_outcome(f->seq, DTHC_NAK_NO_SESSION, 0);
+        }
+        return;
+    }
+    dup = remembered(f->seq);
+    if (dup) { /* a retransmission: answer again, act once */
+        if (B.rx_duplicates != 0xFFFFu) {
+            B.rx_duplicates++;
+        }
+        send_outcome(f->seq, dup->code, dup->detail);
+        return;
+    }
+    command(f->type, f->seq, f->payload);
+}
+
+bool board_poll(void)
+{
+    uint8_t budget = POLL_BYTES_MAX;
+    bool did = false;
+    while (budget--) {
+        dthc_frame_t f;
+        int rc;
+        int16_t c = hal_uart_getc();
+        if (c < 0) {
+            break;
+        }
+        did = true;
+        rc = dthc_rx_feed(&board_rx, (uint8_t)c, &f);
+        if (rc == 0) {
+            continue;
+        }
+        if (rc == 1 || rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) {
+            finalise_boot_id();
+            hal_tick_lock();
+            if (rc == 1) {
+                frame(&f);
+            } else {
+                renew_lease(); /* a valid CRC: the host is alive */
+                if (f.seq) {
+                    send_outcome(f.seq, rc == DTHC_ERR_UNKNOWN_TYPE ? DTHC_NAK_UNKNOWN_TYPE
+                                                                   : DTHC_NAK_BAD_LENGTH, 0);
+                }
+            }
+            hal_tick_unlock();
+        }
+    }
+    return did;
+}

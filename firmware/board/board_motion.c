@@ -1,0 +1,301 @@
+/*
+ * board_motion.c - Z: trapezoidal Z_MOVE, Z_PROBE with its stop on contact, Z_VELOCITY
+ * with expiry, Z_STOP, soft limits. Runs once per tick: the velocity ramps towards what
+ * the mode wants by at most the acceleration limit per tick, and the step generator gets
+ * bounds it never steps past (a move's target, a probe's end, the soft limits, an active
+ * limit switch), so a late tick cannot overshoot them.
+ */
+#include "board_internal.h"
+
+static int32_t brake_full_um; /* distance beyond which braking never limits the speed */
+static int32_t creep_um_s;    /* the speed at which one step from the end still stops */
+
+static uint32_t isqrt32(uint32_t x)
+{
+    uint32_t r = 0;
+    uint32_t bit = 1UL << 30;
+    while (bit > x) {
+        bit >>= 2;
+    }
+    while (bit) {
+        if (x >= r + bit) {
+            x -= r + bit;
+            r = (r >> 1) + bit;
+        } else {
+            r >>= 1;
+        }
+        bit >>= 2;
+    }
+    return r;
+}
+
+/* The highest speed from which Z stops within d_um at the acceleration limit. */
+static int32_t brake_um_s(int32_t d_um)
+{
+    const board_config_t *c = B.cfg;
+    if (d_um <= 0) {
+        return 0;
+    }
+    if (d_um >= brake_full_um) {
+        return c->z_max_speed_um_s;
+    }
+    return (int32_t)isqrt32(2UL * (uint32_t)c->z_accel_um_s2 * (uint32_t)d_um);
+}
+
+static int32_t steps_of(int32_t um)
+{
+    return (um - B.cfg->z_boot_um) * (int32_t)B.cfg->z_steps_per_mm / 1000;
+}
+
+int32_t board_z_um(void)
+{
+    return B.cfg->z_boot_um + hal_z_steps() * 1000 / (int32_t)B.cfg->z_steps_per_mm;
+}
+
+void board_z_update_dv(void)
+{
+    B.z_dv_um_s = (int32_t)((uint32_t)B.cfg->z_accel_um_s2 / 1000u * B.period_us / 1000u);
+    if (B.z_dv_um_s < 1) {
+        B.z_dv_um_s = 1;
+    }
+}
+
+void board_z_init(void)
+{
+    const board_config_t *c = B.cfg;
+    uint32_t vmax = (uint32_t)c->z_max_speed_um_s;
+    brake_full_um = (int32_t)(vmax * vmax / (2u * (uint32_t)c->z_accel_um_s2)) + 1;
+    creep_um_s = brake_um_s((int32_t)(1000u / c->z_steps_per_mm) + 1);
+    board_z_update_dv();
+    hal_z_drive(0, steps_of(c->z_min_um), steps_of(c->z_max_um));
+}
+
+bool board_z_busy(void)
+{
+    return B.z_mode != Z_IDLE || B.z_v_um_s != 0;
+}
+
+void board_send_motion_done(void)
+{
+    uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
+    p[0] = B.last_motion.result;
+    dthc_put_i32(p + 1, B.last_motion.z_um);
+    dthc_put_u32(p + 5, B.last_motion.t_us);
+    board_send_small(DTHC_MSG_MOTION_DONE, B.last_motion.seq, 9);
+}
+
+void board_send_probe_result(void)
+{
+    uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
+    p[0] = B.last_probe.result;
+    dthc_put_u16(p + 1, B.last_probe.sensor);
+    dthc_put_i32(p + 3, B.last_probe.contact_z_um);
+    dthc_put_i32(p + 7, B.last_probe.stop_z_um);
+    dthc_put_u32(p + 11, B.last_probe.t_us);
+    board_send_small(DTHC_MSG_PROBE_RESULT, B.last_probe.seq, 15);
+}
+
+static void motion_done(uint8_t result, int32_t z_um)
+{
+    B.last_motion.valid = 1;
+    B.last_motion.seq = B.move_seq;
+    B.last_motion.result = result;
+    B.last_motion.z_um = z_um;
+    B.last_motion.t_us = hal_time_us();
+    B.move_seq = 0;
+    board_send_motion_done();
+}
+
+static void probe_done(int32_t z_um)
+{
+    B.last_probe.valid = 1;
+    B.last_probe.seq = B.probe_seq;
+    B.last_probe.result = B.probe_outcome;
+    B.last_probe.sensor = B.probe_fired;
+    B.last_probe.contact_z_um = B.probe_outcome == DTHC_PROBE_CONTACT ? B.probe_contact_um : z_um;
+    B.last_probe.stop_z_um = z_um;
+    B.last_probe.t_us = hal_time_us();
+    B.probe_seq = 0;
+    board_send_probe_result();
+}
+
+/* End a running move or probe early, reporting it (the caller decides how Z stops). */
+void board_z_end(uint8_t move_result, uint8_t probe_result)
+{
+    int32_t z = board_z_um();
+    if (B.move_seq) {
+        motion_done(move_result, z);
+    }
+    if (B.probe_seq) {
+        B.probe_outcome = probe_result;
+        probe_done(z);
+    }
+    if (B.z_mode != Z_IDLE) {
+        B.z_mode = Z_STOPPING;
+    }
+}
+
+/* Decelerate to a stop at the acceleration limit, then hold. */
+void board_z_stop(void)
+{
+    if (B.z_mode != Z_IDLE || B.z_v_um_s != 0) {
+        B.z_mode = Z_STOPPING;
+    }
+}
+
+void board_z_move(uint8_t seq, int32_t target_um, uint32_t feed_um_s)
+{
+    board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
+    B.z_mode = Z_MOVE;
+    B.z_target_um = target_um;
+    B.z_feed_um_s = feed_um_s > (uint32_t)B.cfg->z_max_speed_um_s ? B.cfg->z_max_speed_um_s
+                                                                  : (int32_t)feed_um_s;
+    B.move_seq = seq;
+}
+
+void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint16_t sensors)
+{
+    int32_t z = board_z_um();
+    int32_t travel = max_travel_um > 0x20000000UL ? 0x20000000L : (int32_t)max_travel_um;
+    board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
+    B.z_mode = Z_PROBE;
+    B.z_feed_um_s = feed_um_s > (uint32_t)B.cfg->z_max_speed_um_s ? B.cfg->z_max_speed_um_s
+                                                                  : (int32_t)feed_um_s;
+    B.probe_seq = seq;
+    B.probe_sensors = sensors;
+    B.probe_end_um = z - travel;
+    B.probe_to_limit = B.probe_end_um < B.cfg->z_min_um;
+    if (B.probe_to_limit) {
+        B.probe_end_um = B.cfg->z_min_um;
+    }
+    B.probe_fired = (uint16_t)(B.inputs & sensors);
+    B.probe_outcome = BOARD_NO_OUTCOME;
+    if (B.probe_fired) { /* already in contact: zero travel */
+        B.probe_outcome = DTHC_PROBE_CONTACT;
+        B.probe_contact_um = z;
+    }
+}
+
+void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms)
+{
+    int32_t vmax = B.cfg->z_max_speed_um_s;
+    if (B.move_seq || B.probe_seq) {
+        board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
+    }
+    B.z_mode = Z_VELOCITY;
+    B.z_feed_um_s = velocity_um_s > vmax ? vmax : velocity_um_s < -vmax ? -vmax : velocity_um_s;
+    B.zvel_expiry_us = hal_time_us() + (uint32_t)expiry_ms * 1000u;
+}
+
+/* Speed towards an end d_um away: as fast as the feed allows while still able to stop
+ * there (looking one tick ahead), never so slow that the last steps stall. */
+static int32_t approach_um_s(int32_t d_um, int32_t feed)
+{
+    int32_t ahead = (B.z_v_um_s < 0 ? -B.z_v_um_s : B.z_v_um_s) * (int32_t)B.period_us / 1000000L;
+    int32_t v;
+    if (d_um <= 0) {
+        return 0;
+    }
+    v = brake_um_s(d_um - ahead);
+    if (v < creep_um_s) {
+        v = creep_um_s;
+    }
+    return v > feed ? feed : v;
+}
+
+void board_z_tick(void)
+{
+    const board_config_t *c = B.cfg;
+    int32_t z = board_z_um();
+    int32_t lo = c->z_min_um;
+    int32_t hi = c->z_max_um;
+    int32_t want = 0;
+    int32_t v = B.z_v_um_s;
+    int32_t dv = B.z_dv_um_s;
+
+    switch (B.z_mode) {
+    case Z_MOVE: {
+        int32_t d = B.z_target_um - z;
+        if (hal_z_steps() == steps_of(B.z_target_um)) {
+            v = 0; /* at the target: the last steps came at creep speed */
+            B.z_mode = Z_IDLE;
+            motion_done(DTHC_MOTION_REACHED, z);
+        } else if (d > 0) {
+            hi = B.z_target_um;
+            want = approach_um_s(d, B.z_feed_um_s);
+        } else {
+            lo = B.z_target_um;
+            want = -approach_um_s(-d, B.z_feed_um_s);
+        }
+        break;
+    }
+    case Z_PROBE:
+        if (B.probe_outcome == BOARD_NO_OUTCOME) {
+            uint16_t fired = (uint16_t)(B.inputs & B.probe_sensors);
+            if (fired) {
+                /* The stop on contact: decided here, in the tick that read the input. */
+                B.probe_outcome = DTHC_PROBE_CONTACT;
+                B.probe_fired = fired;
+                B.probe_contact_um = z;
+            } else if (z <= B.probe_end_um) {
+                B.probe_outcome = B.probe_to_limit ? DTHC_PROBE_LIMIT : DTHC_PROBE_NO_CONTACT;
+            }
+        }
+        lo = B.probe_end_um;
+        if (B.probe_outcome == BOARD_NO_OUTCOME) {
+            want = -approach_um_s(z - B.probe_end_um, B.z_feed_um_s);
+        } else if (v == 0) {
+            B.z_mode = Z_IDLE;
+            probe_done(z);
+        }
+        break;
+    case Z_VELOCITY:
+        if ((int32_t)(B.now_us - B.zvel_expiry_us) >= 0) {
+            B.z_mode = Z_STOPPING; /* no newer Z_VELOCITY in time */
+            break;
+        }
+        want = B.z_feed_um_s;
+        if (want > 0) {
+            if (z >= hi) {
+                board_latch(DTHC_FAULT_Z_LIMIT, 1);
+                want = 0;
+            } else {
+                int32_t w = approach_um_s(hi - z, want);
+                want = w < want ? w : want;
+            }
+        } else if (want < 0) {
+            if (z <= lo) {
+                board_latch(DTHC_FAULT_Z_LIMIT, 0);
+                want = 0;
+            } else {
+                int32_t w = -approach_um_s(z - lo, -want);
+                want = w > want ? w : want;
+            }
+        }
+        break;
+    case Z_STOPPING:
+        if (v == 0) {
+            B.z_mode = Z_IDLE;
+        }
+        break;
+    default:
+        break;
+    }
+    if (B.z_mode == Z_STOPPING || B.z_mode == Z_IDLE) {
+        want = 0;
+    }
+    if (v < want) {
+        v = want - v > dv ? v + dv : want;
+    } else if (v > want) {
+        v = v - want > dv ? v - dv : want;
+    }
+    B.z_v_um_s = v;
+    /* An active limit switch blocks motion towards it at once. */
+    if (B.inputs & (1u << DTHC_INPUT_Z_LIMIT_MIN)) {
+        lo = z;
+    }
+    if (B.inputs & (1u << DTHC_INPUT_Z_LIMIT_MAX)) {
+        hi = z;
+    }
+    hal_z_drive(v * (int32_t)c->z_steps_per_mm / 1000, steps_of(lo), steps_of(hi));
+}
