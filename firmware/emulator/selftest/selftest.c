@@ -13,6 +13,9 @@
  *   O1/O0     -> O1/O0                        ohmic-sense enable output
  *   C1/C0     -> C1/C0                        copy mode: the torch output follows ESTOP
  *   R         -> R<hex>                       MCUSR as it was at boot
+ *   F         -> 0x00, a COBS frame (PROTOCOL.md §9's ACK of seq 4), then F
+ * A 0x00 byte (a frame delimiter) ends a line without a reply: frames sent to it are
+ * swallowed, so a test can send real frames and read the host's record of them.
  * At boot it prints "BOOT <MCUSR hex>".
  */
 #include <avr/interrupt.h>
@@ -183,6 +186,14 @@ static void command(char *line, uint8_t len)
 		copy_mode = line[1] == '1';
 		puts_(line);
 		break;
+	case 'F': {
+		static const uint8_t ack[] = {0x09, 0x80, 0x04, 0x34, 0x12, 0xED, 0x5E, 0x45, 0xF8, 0x00};
+		put(0); /* a lone delimiter ends the text sent before */
+		for (uint8_t i = 0; i < sizeof ack; i++)
+			put((char)ack[i]);
+		put('F');
+		break;
+	}
 	case 'R':
 		put('R');
 		put_hex(boot_mcusr);
@@ -245,6 +256,8 @@ int main(void)
 		if (ch == '\n') {
 			if (len)
 				command(line, len);
+			len = 0;
+		} else if (ch == 0) {
 			len = 0;
 		} else if (len < sizeof line - 1) {
 			line[len++] = (char)ch;

@@ -1,0 +1,119 @@
+"""Where the source checkout is, which build tools are missing, and ``make`` for what is
+stale: the host program (``firmware/emulator``) and the firmware ELF (``firmware``)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from typing import Final
+
+__all__ = [
+    "INSTALL_HINT",
+    "MCUS",
+    "BuildError",
+    "EmulatedBoardError",
+    "ToolsMissing",
+    "checkout_root",
+    "ensure_built",
+    "firmware_elf",
+    "host_binary",
+    "missing_tools",
+    "selftest_elf",
+]
+
+MCUS: Final = ("atmega2560", "atmega328p")
+INSTALL_HINT: Final = (
+    "sudo apt-get install simavr libsimavr-dev libsimavrparts1 gcc-avr avr-libc "
+    "binutils-avr libelf-dev pkg-config"
+)
+BUILD_TIMEOUT_S: Final = 600.0
+AVR_LIBC_HEADER: Final = Path("/usr/lib/avr/include/avr/io.h")
+
+
+class EmulatedBoardError(Exception):
+    """Root of this package's errors."""
+
+
+class ToolsMissing(EmulatedBoardError):
+    def __init__(self, missing: list[str]) -> None:
+        self.missing = missing
+        super().__init__(f"missing: {', '.join(missing)}; install them with: {INSTALL_HINT}")
+
+
+class BuildError(EmulatedBoardError):
+    def __init__(self, command: list[str], status: int) -> None:
+        self.command = command
+        self.status = status
+        super().__init__(f"{' '.join(command)} failed (exit status {status})")
+
+
+def checkout_root() -> Path:
+    """The source checkout this package was installed (editable) from: it holds firmware/."""
+    root = Path(__file__).resolve().parents[2]
+    if not (root / "firmware" / "emulator" / "Makefile").is_file():
+        raise EmulatedBoardError(
+            f"no firmware/emulator/Makefile under {root}: dthc_tools must be installed "
+            "editable from a source checkout (pip install -e .) to run the emulated board"
+        )
+    return root
+
+
+def host_binary(root: Path) -> Path:
+    return root / "firmware" / "emulator" / "build" / "dthc-emulated-board-host"
+
+
+def firmware_elf(root: Path, mcu: str) -> Path:
+    return root / "firmware" / "build" / mcu / "dthc-firmware.elf"
+
+
+def selftest_elf(root: Path, mcu: str) -> Path:
+    """The harness's own test program (echo, steps, ADC, inputs), not the firmware."""
+    return root / "firmware" / "emulator" / "build" / f"selftest-{mcu}.elf"
+
+
+def _pkg_exists(name: str) -> bool:
+    if shutil.which("pkg-config") is None:
+        return False
+    done = subprocess.run(  # noqa: S603 - fixed arguments
+        ["pkg-config", "--exists", name],  # noqa: S607 - found on PATH, as make finds it
+        check=False,
+        capture_output=True,
+        timeout=30,
+    )
+    return done.returncode == 0
+
+
+def missing_tools() -> list[str]:
+    """What the build needs and this machine lacks (empty when all is there)."""
+    missing = [tool for tool in ("make", "gcc", "avr-gcc", "pkg-config") if not shutil.which(tool)]
+    if not AVR_LIBC_HEADER.is_file():
+        missing.append("avr-libc")
+    if shutil.which("pkg-config"):
+        missing += [f"{pkg} (pkg-config)" for pkg in ("simavr", "libelf") if not _pkg_exists(pkg)]
+    return missing
+
+
+def _make(directory: Path, *targets: str) -> None:
+    command = ["make", "-C", str(directory), *targets]
+    # make's chatter goes to stderr: stdout carries READY and the control replies.
+    done = subprocess.run(  # noqa: S603 - make, our own Makefiles
+        command, check=False, stdout=sys.stderr, stderr=sys.stderr, timeout=BUILD_TIMEOUT_S
+    )
+    if done.returncode != 0:
+        raise BuildError(command, done.returncode)
+
+
+def ensure_built(root: Path, *, firmware: bool = True) -> None:
+    """``make`` the host program and the self-test ELFs, and the firmware unless
+    ``firmware`` is False (make rebuilds only what is missing or stale). ToolsMissing
+    names what to install; BuildError the command that failed."""
+    missing = missing_tools()
+    if missing:
+        raise ToolsMissing(missing)
+    _make(root / "firmware" / "emulator", "host", "selftest")
+    if firmware:
+        if not (root / "firmware" / "Makefile").is_file():
+            raise EmulatedBoardError(f"no firmware/Makefile under {root}: the firmware is missing")
+        _make(root / "firmware")

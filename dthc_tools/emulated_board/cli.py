@@ -1,0 +1,113 @@
+"""``dthc-emulated-board --pty PATH``: the reference firmware on an emulated ATmega.
+
+Builds what is missing or stale (``make -C firmware`` for the ELF, ``make -C
+firmware/emulator`` for the host program), then execs the host program in this very
+process, so the PID the user sees is the emulator's: SIGUSR2 to it resets the MCU, SIGTERM
+stops it. Missing build tools: says which command installs them and exits 2.
+
+Prints ``READY <pty path>`` once the board runs; reads control commands on stdin
+(firmware/emulator/README.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .build import (
+    INSTALL_HINT,
+    MCUS,
+    EmulatedBoardError,
+    ToolsMissing,
+    checkout_root,
+    ensure_built,
+    firmware_elf,
+    host_binary,
+    selftest_elf,
+)
+
+__all__ = ["build_parser", "main"]
+
+EXIT_SETUP = 2
+
+# Model options passed through to the host program: (name, help).
+MODEL_OPTIONS: tuple[tuple[str, str], ...] = (
+    ("plate-mm", "the plate's surface Z (default 20)"),
+    ("warp-mm", "warp amplitude A: the surface varies as A*sin(2*pi*t/P) while cutting"),
+    ("warp-period-s", "warp period P in seconds of transferred arc"),
+    ("arc-slope-v-mm", "arc volts per mm of height (default 7.5)"),
+    ("cut-v", "arc volts at cut height (default 116)"),
+    ("cut-height-mm", "cut height for --cut-v (default 1.5)"),
+    ("noise-v", "Gaussian sigma per ADC conversion, volts (default 0.4)"),
+    ("arc-ok-delay-ms", "torch on -> transfer and arc OK (default 100)"),
+    ("float-travel-mm", "float switch closes this far below the touch point (default 1.5)"),
+    ("ocv-v", "open-circuit (pilot, lost arc) volts (default 250)"),
+    ("transfer-max-mm", "the pilot transfers at most this high (default 8)"),
+    ("lose-above-mm", "a transferred arc is lost above this height (default 10)"),
+    ("pilot-timeout-ms", "a pilot that never transfers ends after this (default 3000)"),
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="dthc-emulated-board",
+        description="The reference firmware's ELF on an emulated ATmega (simavr), UART0 on a "
+        "pty, with a plate, an arc and a Z axis. SIGUSR2 resets the MCU.",
+    )
+    p.add_argument("--pty", type=Path, required=True, help="symlink the pty's slave here")
+    p.add_argument("--mcu", choices=MCUS, default=MCUS[0])
+    p.add_argument("--elf", type=Path, help="run this ELF instead of the built firmware")
+    p.add_argument(
+        "--selftest", action="store_true", help="run the harness's own test program instead"
+    )
+    p.add_argument("--record", type=Path, help="write the event record here")
+    p.add_argument("--seed", type=int, default=1, help="noise seed")
+    p.add_argument("--no-build", action="store_true", help="do not run make first")
+    m = p.add_argument_group("plate and arc model")
+    for name, text in MODEL_OPTIONS:
+        m.add_argument(f"--{name}", type=float, help=text)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        root = checkout_root()
+        if args.selftest:
+            elf = selftest_elf(root, args.mcu)
+        elif args.elf is not None:
+            elf = args.elf
+        else:
+            elf = firmware_elf(root, args.mcu)
+        if not args.no_build:
+            ensure_built(root, firmware=args.elf is None and not args.selftest)
+    except ToolsMissing as exc:
+        print(
+            f"dthc-emulated-board: build tools missing: {', '.join(exc.missing)}\n"
+            f"install them with: {INSTALL_HINT}",
+            file=sys.stderr,
+        )
+        return EXIT_SETUP
+    except EmulatedBoardError as exc:
+        print(f"dthc-emulated-board: {exc}", file=sys.stderr)
+        return EXIT_SETUP
+    host = host_binary(root)
+    command = [str(host), "--elf", str(elf), "--mcu", args.mcu, "--pty", str(args.pty)]
+    command += ["--seed", str(args.seed)]
+    if args.record is not None:
+        command += ["--record", str(args.record)]
+    for name, _ in MODEL_OPTIONS:
+        value = getattr(args, name.replace("-", "_"))
+        if value is not None:
+            command += [f"--{name}", repr(value)]
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.execv(host, command)  # noqa: S606 - replaces this process: the user's PID is the host's
+    return EXIT_SETUP  # not reached: execv returns only by raising OSError
+
+
+if __name__ == "__main__":
+    sys.exit(main())
