@@ -12,6 +12,8 @@
 #include "avr_uart.h"
 #include "sim_cycle_timers.h"
 #include "sim_elf.h"
+#include "sim_interrupts.h"
+#include "sim_io.h"
 
 #include "host.h"
 
@@ -277,6 +279,47 @@ static void set_uart_flags(struct emu *e)
 	e->uart_flags = flags;
 }
 
+/*
+ * An AVR keeps an interrupt's flag set while its enable bit is clear, and takes the
+ * interrupt as soon as the bit is set again. simavr does not: a flag raised while masked
+ * is never made pending when the mask is lifted (and a pending one masked is dropped), so a
+ * firmware that masks its timer compare for a moment loses the tick (and, in normal mode,
+ * waits a whole timer wrap for the next match). This write hook on the plain enable
+ * registers (TIMSKn, EIMSK, PCICR: those no simavr module watches) restores the hardware
+ * rule: when an enable bit goes 1 with its flag set, the interrupt is raised again.
+ */
+static void enable_write_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param)
+{
+	(void)param;
+	uint8_t before = avr->data[addr];
+	avr_core_watch_write(avr, addr, v);
+	uint8_t rising = (uint8_t)(v & ~before);
+	if (!rising)
+		return;
+	avr_int_table_p table = &avr->interrupts;
+	for (int i = 0; i < table->vector_count; i++) {
+		avr_int_vector_t *vec = table->vector[i];
+		if (vec->enable.reg != addr || !(rising & (vec->enable.mask << vec->enable.bit)))
+			continue;
+		if (vec->raised.reg && avr_regbit_get(avr, vec->raised) && !vec->pending)
+			avr_raise_interrupt(avr, vec);
+	}
+}
+
+static void hook_enable_registers(struct emu *e)
+{
+	avr_t *avr = e->avr;
+	avr_int_table_p table = &avr->interrupts;
+	for (int i = 0; i < table->vector_count; i++) {
+		avr_io_addr_t reg = table->vector[i]->enable.reg;
+		if (reg < 32 || AVR_DATA_TO_IO(reg) >= MAX_IOs)
+			continue;
+		if (avr->io[AVR_DATA_TO_IO(reg)].w.c) /* a module's register, or already hooked */
+			continue;
+		avr_register_io_write(avr, reg, enable_write_hook, e);
+	}
+}
+
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 {
 	(void)avr;
@@ -313,6 +356,7 @@ int board_init(struct emu *e)
 	e->avr->vcc = e->avr->avcc = e->avr->aref = (uint32_t)e->pins->adc_ref_mv;
 	e->avr->sleep = no_sleep;
 	e->avr->log = 1; /* warnings only */
+	hook_enable_registers(e);
 
 	find_ios(e);
 	if (!e->uart) {
