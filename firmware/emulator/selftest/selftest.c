@@ -13,6 +13,9 @@
  *   O1/O0     -> O1/O0                        ohmic-sense enable output
  *   C1/C0     -> C1/C0                        copy mode: the torch output follows ESTOP
  *   R         -> R<hex>                       MCUSR as it was at boot
+ *   K         -> K<n>                         Timer1 compare ticks (1 ms) counted over 20
+ *                                             rounds of: tick masked 1.2 ms, unmasked 0.3 ms
+ *                                             (an AVR takes a masked tick on unmask: ~30)
  *   F         -> 0x00, a COBS frame (PROTOCOL.md §9's ACK of seq 4), then F
  * A 0x00 byte (a frame delimiter) ends a line without a reply: frames sent to it are
  * swallowed, so a test can send real frames and read the host's record of them.
@@ -40,6 +43,39 @@
 		PORT_OF(n##_PORT) |= (uint8_t)(1u << n##_BIT);         \
 	} while (0)
 #define IN_ACTIVE(n) ((PIN_OF(n##_PORT) & (1u << n##_BIT)) == 0)
+
+static volatile uint16_t ticks;
+
+ISR(TIMER1_COMPA_vect)
+{
+	OCR1A += 2000; /* 1 ms at clk/8 */
+	ticks++;
+}
+
+static void wait_counts(uint16_t n)
+{
+	uint16_t start = TCNT1;
+	while ((uint16_t)(TCNT1 - start) < n)
+		;
+}
+
+static uint16_t masked_ticks(void)
+{
+	TCCR1A = 0;
+	TCCR1B = (uint8_t)(1 << CS11); /* normal mode, clk/8: 2 counts per us */
+	OCR1A = (uint16_t)(TCNT1 + 2000);
+	TIFR1 = (uint8_t)(1 << OCF1A);
+	ticks = 0;
+	TIMSK1 = (uint8_t)(1 << OCIE1A);
+	for (uint8_t i = 0; i < 20; i++) {
+		TIMSK1 = 0;
+		wait_counts(2400);
+		TIMSK1 = (uint8_t)(1 << OCIE1A);
+		wait_counts(600);
+	}
+	TIMSK1 = 0;
+	return ticks;
+}
 
 static volatile uint8_t rx_buf[128];
 static volatile uint8_t rx_head, rx_tail;
@@ -194,6 +230,10 @@ static void command(char *line, uint8_t len)
 		put('F');
 		break;
 	}
+	case 'K':
+		put('K');
+		put_dec(masked_ticks());
+		break;
 	case 'R':
 		put('R');
 		put_hex(boot_mcusr);
