@@ -1,49 +1,61 @@
-"""``bench control``: our THC against two baselines on the same plant, in simulated time.
+"""``bench control``: our THC against LinuxCNC's plasmac and two baselines, same plant.
 
-Per scenario, the same seeds and the same path run three times through the real cut
-sequence over a :class:`~mock_device.sim.SimulatedBoard` (:class:`ClosedLoop`):
+Per scenario, the same seeds and the same path run once per controller:
 
-- ``ours``: :class:`~dthc_bridge.controller.thc.ThcController` as configured by default
-  (it follows a steady slow-down once its voltage rise has settled: ``slow_follow``);
-- ``reference``: :class:`~.reference.ReferenceThc`, the open controllers' common law;
+- ``ours``: :class:`~dthc_bridge.controller.thc.ThcController` as configured by default,
+  through the daemon's own service and cut sequence over a
+  :class:`~mock_device.sim.SimulatedBoard` (:class:`ClosedLoop`), at the material's cut
+  voltage (``G200 V``); ``ours_auto`` the same with auto voltage (``G200 V0``);
+- ``plasmac``: LinuxCNC's real plasmac component (:mod:`.plasmac`), hosted in this process
+  with LinuxCNC's motion emulated around it, QtPlasmaC's GUI defaults in mode 1, at the
+  material's cut volts; ``plasmac_auto`` with its default auto volts;
+- ``reference``: :class:`~.reference.ReferenceThc`, our re-writing of the open controllers'
+  law, in our sequence;
 - ``no_thc``: THC disabled (``M666``): the torch holds the probed cut height.
 
-Only the controller differs: sequence, THC delay, target voltage (the scenario material's
-cut voltage, ``G200 V``), anti-dive percentage and THC speed limit (``M667 F3000``) are the
-same. Heights are the plant's ground truth (:mod:`mock_device.plant.truth`): the RMS and
-max error against the cut height while the gantry moves from 0.5 s after arc transfer,
-and dives (true height below half the cut height).
+The same for all: THC speed limit (``M667 F3000``, plasmac's ``thc-feed-rate``), pierce
+delay, probe speed, velocity anti-dive at 90 %. Heights are the plant's ground truth
+(:mod:`mock_device.plant.truth`): the RMS and max error against the cut height while the
+gantry moves from 0.5 s after arc transfer, and dives (true height below half the cut
+height). Figures and goals: :mod:`.control_report`.
 
 Paths: the scenario's ``default_program``, split into one cut per ``G0`` (each cut probes,
 pierces and ends with M5), and a slow-down appended to the last cut: a straight segment
 towards the middle of the part at ``--slow-percent`` of the feed, during which the sender
 reports the programmed feed (a PlasmaC ``M67 E3`` velocity reduction), so velocity
-anti-dive must at least hold the torch: the reference holds it to the end of the cut, ours
-holds it until the voltage rise of the slower cut has settled and then follows the plate
-against the voltage measured then. Phases in ``rms_by_phase``: ``delay`` (THC delay),
-``active``, ``locked`` (any lock), ``slow_follow`` (ours, following a slow-down).
+anti-dive must at least hold the torch: the reference and plasmac hold it to the end of
+the cut, ours holds it until the voltage rise of the slower cut has settled and then
+follows the plate against the voltage measured then. Phases in ``rms_by_phase``: ``delay``
+(THC delay), ``active``, ``locked`` (any lock), ``slow_follow`` (ours, following a
+slow-down).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
+import multiprocessing
+import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields, replace
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import Any
 
 from dthc_bridge.config import default_controller_configs
 from dthc_bridge.controller.commands import CutParams
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import Lock, ThcConfig, ThcController
-from dthc_bridge.controller.words import words
+from dthc_bridge.logs import configure_logging
 from dthc_tools.sim.closed_loop import BATCH_S, ClosedLoop
 from mock_device.plant import list_scenarios, load_scenario
-from mock_device.plant.truth import CutStats
 
+from .control_report import CONTROLLERS, scenario_entry, summarize, table
+from .cuts import ControllerResult, CutPlan, VoidLockTally, plan_cuts
+from .plasmac.fetch import DEFAULT_CACHE, PACKAGE, PlasmacUnavailable, Provisioned, provision
+from .plasmac.halrun import install_linuxcnc
+from .plasmac.host import PlasmacSettings, run_plasmac
 from .reference import ReferenceConfig, ReferenceThc
-from .report import Goal, goals_block
 
 __all__ = [
     "CONTROLLERS",
@@ -55,6 +67,8 @@ __all__ = [
     "plan_cuts",
     "run",
     "run_controller",
+    "run_one",
+    "run_scenario",
     "table",
 ]
 
@@ -69,84 +83,9 @@ DEFAULT_SCENARIOS = (
 # Ends in an arc loss by design: run and reported, but outside the goals (the cut faults
 # 2 s after transfer, for every controller, with the THC active for about 1 s).
 SEPARATE_SCENARIOS = ("arc_lost_midcut",)
-CONTROLLERS = ("ours", "reference", "no_thc")
-RMS_RATIO_GOAL = 0.6
 THC_FEED_MM_MIN = 3000.0  # M667 F3000: 50 mm/s, as the controller tests use
 PIERCE_DELAY_MS = 300.0
 TOUCH_FEED_MM_MIN = 300.0
-
-
-@dataclass(frozen=True)
-class CutPlan:
-    approach: str  # the rapid to the pierce point, before M3
-    lines: tuple[str, ...]  # the cut's motion, torch on
-    slow: tuple[str, ...] = ()  # the slowed-down tail, sent after ``lines``
-    slow_feed_mm_min: float | None = None
-    programmed_feed_mm_min: float | None = None
-
-
-def plan_cuts(
-    program: Sequence[str], *, max_path_mm: float | None = None, slow_percent: float = 50.0
-) -> tuple[CutPlan, ...]:
-    """One cut per ``G0`` of an absolute (G90) program, a slow-down after the last one.
-
-    ``max_path_mm`` shortens the program (straight moves clipped, later ones dropped).
-    """
-    cuts: list[tuple[str, list[str]]] = []
-    x = y = 0.0
-    feed: float | None = None
-    travelled = 0.0
-    points: list[tuple[float, float]] = []
-    end = (x, y)  # where the last cut line ended
-    for raw in program:
-        w = dict(words(raw))  # the last word of a letter counts
-        g = w.get("G")
-        if "X" not in w and "Y" not in w:
-            continue
-        if max_path_mm is not None and travelled >= max_path_mm:
-            break
-        nx, ny = w.get("X", x), w.get("Y", y)
-        if g == 0:
-            cuts.append((f"G0 X{nx:g} Y{ny:g}", []))
-        else:
-            if not cuts:
-                raise ValueError(f"cut motion before the first G0: {raw!r}")
-            feed = w.get("F", feed)
-            length = math.dist((x, y), (nx, ny))
-            if max_path_mm is not None and g == 1 and travelled + length > max_path_mm:
-                keep = (max_path_mm - travelled) / length
-                nx, ny = x + (nx - x) * keep, y + (ny - y) * keep
-                line = f"G1 X{nx:.3f} Y{ny:.3f}" + (f" F{feed:g}" if "F" in w else "")
-                length = max_path_mm - travelled
-            else:
-                line = raw.strip()
-            travelled += length
-            cuts[-1][1].append(line)
-            end = (nx, ny)
-        points.append((nx, ny))
-        x, y = nx, ny
-    cuts = [(a, lines) for a, lines in cuts if lines]
-    if not cuts or feed is None:
-        raise ValueError("the program has no cut")
-    plans = [CutPlan(approach, tuple(lines)) for approach, lines in cuts]
-    # The slow-down: from the end of the last cut towards the middle of the part.
-    cx = (min(p[0] for p in points) + max(p[0] for p in points)) / 2
-    cy = (min(p[1] for p in points) + max(p[1] for p in points)) / 2
-    x, y = end
-    dist = math.dist((x, y), (cx, cy))
-    if slow_percent < 100.0 and dist > 1.0:
-        length = min(100.0, dist) if max_path_mm is None else min(50.0, dist)
-        sx, sy = x + (cx - x) * length / dist, y + (cy - y) * length / dist
-        slow_feed = feed * slow_percent / 100.0
-        last = plans[-1]
-        plans[-1] = CutPlan(
-            last.approach,
-            last.lines,
-            (f"G1 X{sx:.3f} Y{sy:.3f} F{slow_feed:g}",),
-            slow_feed,
-            feed,
-        )
-    return tuple(plans)
 
 
 class BenchLoop(ClosedLoop):
@@ -162,6 +101,7 @@ class BenchLoop(ClosedLoop):
         # Per phase: [batches, sum of squared height errors], sampled at each batch end
         # while the gantry moves in CUTTING: where the error comes from.
         self.phase_err: dict[str, list[float]] = {}
+        self.void = VoidLockTally()
 
     def _record(self) -> None:
         super()._record()
@@ -174,11 +114,12 @@ class BenchLoop(ClosedLoop):
                 self.locked_s += batch_s
             for lock in locks:
                 self.lock_s[str(lock)] = self.lock_s.get(str(lock), 0.0) + batch_s
+            self.void.update(Lock.VOID in locks, self.plant.arc.gap_voltage_v, batch_s)
             if self.plant.gantry.speed_mm_s > 0.0:
                 phase = _phase(locks, sequence.thc.slow_target_v is not None)
                 acc = self.phase_err.setdefault(phase, [0.0, 0.0])
-                acc[0] += 1
-                acc[1] += (self.plant.true_height_mm - self.cut_height_mm) ** 2
+                acc[0] += batch_s
+                acc[1] += batch_s * (self.plant.true_height_mm - self.cut_height_mm) ** 2
 
 
 def _phase(locks: frozenset[Lock], slow_follow: bool) -> str:
@@ -189,50 +130,6 @@ def _phase(locks: frozenset[Lock], slow_follow: bool) -> str:
     if locks:
         return "locked"
     return "slow_follow" if slow_follow else "active"
-
-
-@dataclass
-class ControllerResult:
-    cuts: list[CutStats] = field(default_factory=list)
-    errors: list[str] = field(default_factory=list)
-    cutting_s: float = 0.0
-    locked_s: float = 0.0
-    lock_s: dict[str, float] = field(default_factory=dict)
-    phase_err: dict[str, list[float]] = field(default_factory=dict)
-    completed_cuts: int = 0
-    planned_cuts: int = 0
-
-    def as_dict(self) -> dict[str, object]:
-        n = sum(c.measured_samples for c in self.cuts)
-        sum2 = sum(
-            c.measured_samples * c.height_rms_error_mm**2 for c in self.cuts if c.measured_samples
-        )
-        rms = math.sqrt(sum2 / n) if n else None
-        worst = max((c.height_max_error_mm for c in self.cuts if c.measured_samples), default=None)
-        lowest = min((c.min_height_mm for c in self.cuts), default=None)
-        total2 = sum(err2 for _, err2 in self.phase_err.values())
-        return {
-            "rms_mm": None if rms is None else round(rms, 4),
-            "max_mm": None if worst is None else round(worst, 3),
-            "min_height_mm": None if lowest is None else round(lowest, 3),
-            "dives": sum(c.dives for c in self.cuts),
-            "touches": sum(c.touches for c in self.cuts),
-            "cutting_s": round(self.cutting_s, 3),
-            "locked_s": round(self.locked_s, 3),
-            "locks_s": {k: round(v, 3) for k, v in sorted(self.lock_s.items())},
-            "measured_s": round(n / 1000.0, 3),
-            "rms_by_phase": {
-                phase: {
-                    "s": round(count * BATCH_S, 3),
-                    "rms_mm": round(math.sqrt(err2 / count), 4),
-                    "share_of_sq_error": round(err2 / total2, 3) if total2 else None,
-                }
-                for phase, (count, err2) in sorted(self.phase_err.items())
-                if count
-            },
-            "cuts_completed": f"{self.completed_cuts}/{self.planned_cuts}",
-            "errors": self.errors,
-        }
 
 
 def make_thc(kind: str, reference: ReferenceConfig, ours: ThcConfig | None = None) -> ThcController:
@@ -251,7 +148,11 @@ def run_controller(
     reference: ReferenceConfig | None = None,
     ours: ThcConfig | None = None,
 ) -> ControllerResult:
-    """Run every planned cut of ``scenario`` with one controller; ground truth per cut."""
+    """Run every planned cut of ``scenario`` with one controller; ground truth per cut.
+
+    ``ours_auto`` is ours with auto voltage (``G200 V0``) instead of the material's."""
+    auto = kind == "ours_auto"
+    kind = "ours" if auto else kind
     loop = BenchLoop(scenario, seed, make_thc(kind, reference or ReferenceConfig(), ours))
     material = load_scenario(scenario).material
     sequence = loop.sequence
@@ -262,7 +163,7 @@ def run_controller(
             pierce_height_mm=material.pierce_height_mm,
             pierce_delay_ms=PIERCE_DELAY_MS,
             cut_height_mm=material.cut_height_mm,
-            cut_voltage_v=material.cut_voltage_v,
+            cut_voltage_v=None if auto else material.cut_voltage_v,
             ohmic=True,
         )
     )
@@ -295,25 +196,61 @@ def run_controller(
     result.locked_s = loop.locked_s
     result.lock_s = loop.lock_s
     result.phase_err = loop.phase_err
+    result.pauses = list(loop.pauses)
+    result.void = loop.void
     return result
 
 
-def _merge(results: Sequence[ControllerResult]) -> ControllerResult:
-    merged = ControllerResult()
-    for r in results:
-        merged.cuts += r.cuts
-        merged.errors += r.errors
-        merged.cutting_s += r.cutting_s
-        merged.locked_s += r.locked_s
-        for lock, seconds in r.lock_s.items():
-            merged.lock_s[lock] = merged.lock_s.get(lock, 0.0) + seconds
-        for phase, (count, err2) in r.phase_err.items():
-            acc = merged.phase_err.setdefault(phase, [0.0, 0.0])
-            acc[0] += count
-            acc[1] += err2
-        merged.completed_cuts += r.completed_cuts
-        merged.planned_cuts += r.planned_cuts
-    return merged
+def run_one(
+    scenario: str,
+    seed: int,
+    kind: str,
+    plans: Sequence[CutPlan],
+    options: RunOptions,
+) -> ControllerResult:
+    """One controller, one seed: the daemon's controllers here, plasmac in its host."""
+    if kind in ("plasmac", "plasmac_auto"):
+        assert options.plasmac is not None
+        settings = PlasmacSettings(
+            use_auto_volts=kind == "plasmac_auto",
+            thc_feed_rate_mm_min=THC_FEED_MM_MIN,
+            pierce_delay_s=PIERCE_DELAY_MS / 1000.0,
+            probe_feed_rate_mm_min=TOUCH_FEED_MM_MIN,
+        )
+        return run_plasmac(
+            options.plasmac, scenario, seed, plans, settings, slow_percent=options.slow_percent
+        )
+    return run_controller(
+        scenario, seed, kind, plans, reference=options.reference, ours=options.ours
+    )
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    slow_percent: float = 50.0
+    max_path_mm: float | None = None
+    reference: ReferenceConfig | None = None
+    ours: ThcConfig | None = None
+    plasmac: Provisioned | None = None
+
+
+def _job(args: tuple[str, int, str, RunOptions]) -> ControllerResult:
+    scenario, seed, kind, options = args
+    return run_one(scenario, seed, kind, _plans(scenario, options), options)
+
+
+def _quiet() -> None:
+    """A worker's logs go where the bench's go: stderr, warnings and up (stdout is the
+    report's)."""
+    configure_logging("warning")
+
+
+def _plans(scenario: str, options: RunOptions) -> tuple[CutPlan, ...]:
+    return plan_cuts(
+        load_scenario(scenario).default_program,
+        max_path_mm=options.max_path_mm,
+        slow_percent=options.slow_percent,
+    )
 
 
 def run_scenario(
@@ -324,44 +261,16 @@ def run_scenario(
     slow_percent: float = 50.0,
     reference: ReferenceConfig | None = None,
     ours: ThcConfig | None = None,
-    controllers: Sequence[str] = CONTROLLERS,
+    controllers: Sequence[str] = ("ours", "reference", "no_thc"),
+    plasmac: Provisioned | None = None,
 ) -> dict[str, object]:
-    program = load_scenario(scenario).default_program
-    plans = plan_cuts(program, max_path_mm=max_path_mm, slow_percent=slow_percent)
-    figures: dict[str, dict[str, object]] = {}
-    for kind in controllers:
-        runs = [
-            run_controller(scenario, seed, kind, plans, reference=reference, ours=ours)
-            for seed in seeds
-        ]
-        figures[kind] = _merge(runs).as_dict()
-    mine, ref = figures.get("ours"), figures.get("reference")
-    ratio: float | None = None
-    if mine and ref and isinstance(mine["rms_mm"], float) and isinstance(ref["rms_mm"], float):
-        ratio = round(mine["rms_mm"] / ref["rms_mm"], 3) if ref["rms_mm"] > 0 else None
-    in_goals = scenario not in SEPARATE_SCENARIOS
-    entry: dict[str, object] = {
-        "scenario": scenario,
-        "seeds": list(seeds),
-        "cuts": len(plans),
-        "path": [[p.approach, *p.lines, *p.slow] for p in plans],
-        "slow_down": (
-            None
-            if plans[-1].slow_feed_mm_min is None
-            else {
-                "feed_mm_min": plans[-1].slow_feed_mm_min,
-                "reported_feed_mm_min": plans[-1].programmed_feed_mm_min,
-            }
-        ),
-        **figures,
-        "rms_ratio": ratio,
-        "in_goals": in_goals,
-    }
-    if not in_goals:
-        entry["note"] = "ends in an arc loss by design: reported, outside the goals"
-    elif ratio is not None and mine is not None:
-        entry["pass"] = ratio <= RMS_RATIO_GOAL and mine["dives"] == 0
-    return entry
+    """One scenario, every controller and seed, in this process."""
+    options = RunOptions(slow_percent, max_path_mm, reference, ours, plasmac)
+    runs = {kind: [_job((scenario, seed, kind, options)) for seed in seeds] for kind in controllers}
+    return scenario_entry(
+        scenario, seeds, _plans(scenario, options), runs,
+        in_goals=scenario not in SEPARATE_SCENARIOS,
+    )  # fmt: skip
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -371,7 +280,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated scenario names (default: every cut scenario, arc_lost_midcut"
         " reported separately)",
     )
-    parser.add_argument("--seeds", default="1,2,3", help="comma-separated plant seeds")
+    parser.add_argument(
+        "--seeds",
+        default=",".join(str(s) for s in range(1, 11)),
+        help="comma-separated plant seeds",
+    )
+    parser.add_argument(
+        "--controllers", default=",".join(CONTROLLERS),
+        help=f"comma-separated, of {', '.join(CONTROLLERS)}",
+    )  # fmt: skip
+    parser.add_argument(
+        "--jobs", type=int, default=os.cpu_count() or 1,
+        help="worker processes (default: one per core)",
+    )  # fmt: skip
     parser.add_argument(
         "--max-path-mm", type=float, help="shorten each program to this cut length (quick runs)"
     )
@@ -387,6 +308,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--reference-void-cycles", type=float, default=2.0,
         help="reference void threshold = 500 V/s x period x this (plasmac's code: 2)",
     )  # fmt: skip
+    parser.add_argument(
+        "--plasmac-cache", type=Path, default=DEFAULT_CACHE,
+        help="where LinuxCNC's package is downloaded and unpacked (not installed)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--no-fetch", action="store_true",
+        help="do not run apt-get download when plasmac.so is not in the cache",
+    )  # fmt: skip
+    parser.add_argument(
+        "--install-linuxcnc", action="store_true",
+        help="apt-get install linuxcnc-uspace (halrun, for the proof test) before running",
+    )  # fmt: skip
+
+
+def _provision_plasmac(
+    args: argparse.Namespace, say: Callable[[str], None]
+) -> tuple[Provisioned | None, dict[str, object]]:
+    if getattr(args, "install_linuxcnc", False):
+        say(install_linuxcnc())
+    try:
+        found = provision(args.plasmac_cache, fetch=not args.no_fetch, note=say)
+    except PlasmacUnavailable as exc:
+        say(f"plasmac column skipped: {exc}")
+        return None, {"available": False, "reason": str(exc)}
+    return found, {
+        "available": True,
+        "package": f"{PACKAGE} {found.version}",
+        "fetched": found.fetched,
+        "settings": "QtPlasmaC GUI defaults, mode 1; thc-feed-rate = ours (M667 F3000)",
+    }
 
 
 def run(
@@ -397,30 +348,55 @@ def run(
     unknown = [n for n in names if n not in known]
     if unknown:
         raise SystemExit(f"unknown scenario(s): {', '.join(unknown)}; known: {sorted(known)}")
+    kinds = [k.strip() for k in str(args.controllers).split(",") if k.strip()]
+    if bad := [k for k in kinds if k not in CONTROLLERS]:
+        raise SystemExit(f"unknown controller(s): {', '.join(bad)}; known: {CONTROLLERS}")
     seeds = [int(s) for s in str(args.seeds).split(",") if s.strip()]
-    reference = ReferenceConfig(void_threshold_cycles=args.reference_void_cycles)
+    say = progress or (lambda _msg: None)
     t0 = time.perf_counter()
+    plasmac: Provisioned | None = None
+    plasmac_info: dict[str, object] = {"available": False, "reason": "not asked for"}
+    if any(k.startswith("plasmac") for k in kinds):
+        plasmac, plasmac_info = _provision_plasmac(args, say)
+        if plasmac is None:
+            kinds = [k for k in kinds if not k.startswith("plasmac")]
+    reference = ReferenceConfig(void_threshold_cycles=args.reference_void_cycles)
+    options = RunOptions(
+        args.slow_percent, args.max_path_mm, reference, _ours_config(args.ours), plasmac
+    )
+    jobs = [(name, seed, kind, options) for name in names for kind in kinds for seed in seeds]
+    # The daemon's runs cost ten times plasmac's: start them first so the pool ends even.
+    order = sorted(range(len(jobs)), key=lambda i: jobs[i][2].startswith("plasmac"))
+    results: dict[int, ControllerResult] = {}
+    workers = max(1, min(int(args.jobs), len(jobs)))
+    if workers == 1:
+        for i in order:
+            if jobs[i][1] == seeds[0] and jobs[i][2] == kinds[0]:
+                say(jobs[i][0])
+            results[i] = _job(jobs[i])
+    else:
+        say(f"{len(jobs)} runs on {workers} processes")
+        context = multiprocessing.get_context("spawn")  # no fork of a running event loop
+        with ProcessPoolExecutor(workers, mp_context=context, initializer=_quiet) as pool:
+            futures = {pool.submit(_job, jobs[i]): i for i in order}
+            for future in as_completed(futures):
+                results[futures[future]] = future.result()
     scenarios = []
+    k = 0
     for name in names:
-        if progress is not None:
-            progress(name)
+        runs: dict[str, list[ControllerResult]] = {}
+        for kind in kinds:
+            runs[kind] = [results[k + j] for j in range(len(seeds))]
+            k += len(seeds)
         scenarios.append(
-            run_scenario(
-                name, seeds, max_path_mm=args.max_path_mm, slow_percent=args.slow_percent,
-                reference=reference, ours=_ours_config(args.ours),
+            scenario_entry(
+                name, seeds, _plans(name, options), runs, in_goals=name not in SEPARATE_SCENARIOS
             )
-        )  # fmt: skip
-    counted = [s for s in scenarios if s["in_goals"]]
-    ratios = [s["rms_ratio"] for s in counted if isinstance(s["rms_ratio"], float)]
-    worst = max(ratios) if ratios else None
-    dives = {kind: sum(_dives(s, kind) for s in counted) for kind in CONTROLLERS}
-    all_dives = {kind: sum(_dives(s, kind) for s in scenarios) for kind in CONTROLLERS}
-    goals = [
-        Goal("rms_ratio_every_scenario", worst, RMS_RATIO_GOAL, at_most=True),
-        Goal("dives", float(dives["ours"]), 0, at_most=True),
-    ]
+        )
+    summary = summarize(scenarios, kinds, plasmac_info)
     return {
         "seeds": seeds,
+        "controllers": kinds,
         "reference": {
             "deadband_v": reference.deadband_v,
             "gain_mm_s_per_v": reference.gain_mm_s_per_v,
@@ -433,19 +409,9 @@ def run(
         },
         "thc_speed_limit_mm_s": THC_FEED_MM_MIN / 60.0,
         "scenarios": scenarios,
-        "worst_rms_ratio": worst,
-        "total_dives": dives["ours"],
-        "total_dives_by_controller": dives,
-        "dives_including_separate": all_dives,
+        **summary,
         "elapsed_s": round(time.perf_counter() - t0, 2),
-        "goals": goals_block(goals),
     }
-
-
-def _dives(scenario: dict[str, object], kind: str) -> int:
-    figures = scenario[kind]
-    assert isinstance(figures, dict)
-    return int(figures["dives"])
 
 
 def _ours_config(spec: str | None) -> ThcConfig | None:
@@ -468,40 +434,3 @@ def _ours_config(spec: str | None) -> ThcConfig | None:
         else:
             values[key] = float(value)
     return replace(ThcConfig(), **values)
-
-
-def table(report: dict[str, object]) -> str:
-    """The per-scenario comparison as a fixed-width table."""
-    head = (
-        f"{'scenario':<16}{'ours rms/max':>16}{'ref rms/max':>16}{'no-THC rms/max':>18}"
-        f"{'ratio':>8}{'dives o/r/n':>13}{'locked o/r s':>14}"
-    )
-    lines = [head, "-" * len(head)]
-    scenarios = report["scenarios"]
-    assert isinstance(scenarios, list)
-    for s in scenarios:
-
-        def pair(kind: str, s: dict[str, object] = s) -> str:
-            f = s[kind]
-            assert isinstance(f, dict)
-            return f"{f['rms_mm']}/{f['max_mm']}"
-
-        def get(kind: str, key: str, s: dict[str, object] = s) -> object:
-            f = s[kind]
-            assert isinstance(f, dict)
-            return f[key]
-
-        mark = "" if s["in_goals"] else " *"
-        lines.append(
-            f"{s['scenario'] + mark:<16}{pair('ours'):>16}{pair('reference'):>16}"
-            f"{pair('no_thc'):>18}{s['rms_ratio']!s:>8}"
-            f"{get('ours', 'dives')!s:>5}/{get('reference', 'dives')!s}"
-            f"/{get('no_thc', 'dives')!s:<5}"
-            f"{get('ours', 'locked_s')!s:>7}/{get('reference', 'locked_s')!s}"
-        )
-    if any(not s["in_goals"] for s in scenarios):
-        lines.append("* outside the goals (arc lost by design)")
-    lines.append(
-        f"worst rms ratio: {report['worst_rms_ratio']}  dives (ours): {report['total_dives']}"
-    )
-    return "\n".join(lines)

@@ -118,6 +118,12 @@ class Arc:
         self._ok_bounce_end_t = math.inf
         self._ok_switched = True
 
+    @property
+    def gap_voltage_v(self) -> float:
+        """What an old kerf or a void under the tip adds to the voltage now (0 over metal
+        once the last gap's spike has decayed): the truth a void lock is judged against."""
+        return self._gap_v
+
     def set_current_a(self, current_a: float) -> None:
         """Cutter current set point; shifts the voltage by ``current_v_per_a`` per amp."""
         self.current_a = current_a
