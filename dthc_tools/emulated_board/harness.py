@@ -248,11 +248,12 @@ class FrameEvent:
     """A frame delimiter: delivered to the UART (host_frame) or written by the board
     (board_frame); ``type_`` and ``seq`` from the frame's first decoded bytes."""
 
-    t_us: int
+    t_us: int  # the delimiter
     mono_s: float
     type_: int | None
     seq: int | None
     encoded_len: int
+    start_us: int | None  # the frame's first byte (None in records without it)
 
 
 def read_record(path: Path) -> list[RecordEvent]:
@@ -282,7 +283,8 @@ def frames(events: Iterable[RecordEvent], kind: str) -> list[FrameEvent]:
             continue
         type_ = int(e.fields[0], 16) if e.fields[0] != "?" else None
         seq = int(e.fields[1]) if e.fields[1] != "?" else None
-        out.append(FrameEvent(e.t_us, e.mono_s, type_, seq, int(e.fields[2])))
+        start = int(e.fields[3]) if len(e.fields) > 3 else None
+        out.append(FrameEvent(e.t_us, e.mono_s, type_, seq, int(e.fields[2]), start))
     return out
 
 
@@ -300,10 +302,15 @@ def relay_off_after_last_host_byte_us(events: list[RecordEvent]) -> int | None:
 
 
 def reply_delays_us(
-    events: list[RecordEvent], request_type: int = QUERY_TYPE, reply_type: int = STATUS_TYPE
+    events: list[RecordEvent],
+    request_type: int = QUERY_TYPE,
+    reply_type: int = STATUS_TYPE,
+    *,
+    to_first_byte: bool = False,
 ) -> list[int]:
     """For each request frame delivered, simulated µs until the board wrote the delimiter
-    of the first later reply frame with the same seq (QUERY -> STATUS by default)."""
+    (``to_first_byte``: the first byte) of the first later reply frame with the same seq
+    (QUERY -> STATUS by default)."""
     replies = [f for f in frames(events, "board_frame") if f.type_ == reply_type]
     delays = []
     for req in frames(events, "host_frame"):
@@ -311,5 +318,6 @@ def reply_delays_us(
             continue
         match = next((r for r in replies if r.t_us >= req.t_us and r.seq == req.seq), None)
         if match is not None:
-            delays.append(match.t_us - req.t_us)
+            end = match.start_us if to_first_byte and match.start_us is not None else match.t_us
+            delays.append(end - req.t_us)
     return delays

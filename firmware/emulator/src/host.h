@@ -74,6 +74,7 @@ struct frame_peek {
 	uint8_t raw[EMU_FRAME_PEEK + 2];
 	int raw_len;
 	int len; /* encoded bytes so far */
+	uint64_t start_us; /* simulated time of the frame's first byte */
 };
 
 struct pin_ref {

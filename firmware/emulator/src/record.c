@@ -54,10 +54,13 @@ void record_close(struct emu *e)
 	e->record = NULL;
 }
 
-/* One byte of a COBS stream; at a delimiter, records "event,type,seq,encoded_len". */
+/* One byte of a COBS stream; at a delimiter, records
+ * "event,type,seq,encoded_len,first_byte_t_us". */
 void frame_byte(struct emu *e, struct frame_peek *f, uint8_t byte, const char *event)
 {
 	if (byte != 0) {
+		if (f->len == 0)
+			f->start_us = board_us(e);
 		if (f->raw_len < (int)sizeof f->raw)
 			f->raw[f->raw_len++] = byte;
 		f->len++;
@@ -76,8 +79,9 @@ void frame_byte(struct emu *e, struct frame_peek *f, uint8_t byte, const char *e
 			dec[out++] = 0;
 	}
 	if (out >= 2)
-		record_event(e, event, "0x%02x,%u,%d", dec[0], dec[1], f->len);
+		record_event(e, event, "0x%02x,%u,%d,%llu", dec[0], dec[1], f->len,
+			     (unsigned long long)f->start_us);
 	else
-		record_event(e, event, "?,?,%d", f->len);
+		record_event(e, event, "?,?,%d,%llu", f->len, (unsigned long long)f->start_us);
 	f->len = f->raw_len = 0;
 }

@@ -1,0 +1,174 @@
+"""The reference firmware's own ELF (``make -C firmware``) on the emulated Mega 2560: the
+conformance suite against it, and what the host's record measures in simulated time (the
+STATUS reply time, the relay dropping after the host goes silent).
+
+Skipped while firmware/Makefile does not exist. One board is shared by the module; each
+test opens its own session (HELLO).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import statistics
+import subprocess
+import sys
+import time
+import tty
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TypeVar
+
+import pytest
+
+import firmware_protocol as fp
+from dthc_tools.emulated_board import (
+    EmulatedBoard,
+    HarnessOptions,
+    ensure_built,
+    read_record,
+    relay_off_after_last_host_byte_us,
+    reply_delays_us,
+)
+
+pytestmark = pytest.mark.slow
+
+ReplyT = TypeVar("ReplyT")
+
+SAMPLE_PERIOD_US = 1000
+
+
+class RawLink:
+    """Frames over the pty, nothing more: encode, write, decode what comes back."""
+
+    def __init__(self, path: Path) -> None:
+        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(self.fd)
+        self.decoder = fp.StreamDecoder()
+        os.write(self.fd, b"\x00")
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+    def send(self, msg: fp.Message) -> None:
+        os.write(self.fd, fp.encode(msg))
+
+    def request(self, msg: fp.Message, kind: type[ReplyT], timeout_s: float = 1.0) -> ReplyT:
+        """Send ``msg``; the first ``kind`` reply with its seq."""
+        self.send(msg)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.fd], [], [], 0.01)
+            if ready:
+                for reply in self.decoder.feed(os.read(self.fd, 4096)):
+                    if isinstance(reply, kind) and getattr(reply, "seq", None) == msg.seq:
+                        return reply
+        raise TimeoutError(f"no {kind.__name__} to {msg!r}")
+
+
+@pytest.fixture(scope="module")
+def firmware_board(
+    built: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[tuple[EmulatedBoard, Path]]:
+    if not (built / "firmware" / "Makefile").is_file():
+        pytest.skip("the firmware is not there yet (no firmware/Makefile)")
+    ensure_built(built, firmware=True)
+    tmp = tmp_path_factory.mktemp("fw")
+    options = HarnessOptions(record=tmp / "record.csv", build=False, stderr=tmp / "host.log")
+    board = EmulatedBoard(tmp / "board.pty", options)
+    board.start()
+    try:
+        yield board, tmp
+    finally:
+        board.stop()
+
+
+def test_the_conformance_suite_passes_against_the_firmware(
+    firmware_board: tuple[EmulatedBoard, Path],
+) -> None:
+    """``dthc-bridge conformance`` (every check, SIGUSR2 for the reset check) passes
+    against the firmware ELF on the emulated board."""
+    board, tmp = firmware_board
+    done = subprocess.run(
+        [sys.executable, "-m", "dthc_bridge.conformance", str(tmp / "board.pty"), "--yes",
+         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json"],
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    report = json.loads(done.stdout)
+    failed = [f"{c['name']}: {c['figure']}" for c in report["checks"] if not c["passed"]]
+    assert not failed, failed
+    assert done.returncode == 0
+
+
+@pytest.fixture(scope="module")
+def status_delays_us(
+    firmware_board: tuple[EmulatedBoard, Path],
+) -> tuple[list[int], list[int]]:
+    """50 QUERY(STATUS), one at a time; for each, simulated µs from the query's delimiter
+    delivered to the UART to the STATUS reply's first byte and to its delimiter, written by
+    the firmware (the record pairs them by type and seq)."""
+    _, tmp = firmware_board
+    link = RawLink(tmp / "board.pty")
+    try:
+        mark = read_record(tmp / "record.csv")[-1].t_us
+        for seq in range(1, 51):
+            link.request(fp.Query(seq, fp.QueryWhat.STATUS), fp.Status)
+            time.sleep(0.005)
+    finally:
+        link.close()
+    time.sleep(0.05)
+    events = [e for e in read_record(tmp / "record.csv") if e.t_us > mark]
+    return reply_delays_us(events, to_first_byte=True), reply_delays_us(events)
+
+
+def test_the_record_times_each_status_reply(status_delays_us: tuple[list[int], list[int]]) -> None:
+    """Every query is paired with its reply; the first byte leaves before the delimiter,
+    both within the host's 20 ms ack timeout."""
+    begun, ended = status_delays_us
+    assert len(begun) == len(ended) == 50
+    assert all(0 < b < e < 20_000 for b, e in zip(begun, ended, strict=True))
+
+
+@pytest.mark.xfail(
+    reason="firmware finding (2026-11-25): a STATUS is complete p50 1.7 ms, max 2.6-6 ms "
+    "after a lone QUERY in simulated time; PROTOCOL.md §8 allows 1 ms unloaded",
+    strict=False,
+)
+def test_status_replies_are_sent_within_a_millisecond(
+    status_delays_us: tuple[list[int], list[int]],
+) -> None:
+    """PROTOCOL.md §8: command received -> reply sent within 1 ms when the board is not
+    loaded (one query at a time): the reply's delimiter written within 1000 µs."""
+    begun, ended = status_delays_us
+    figures = {
+        "first byte p50/max us": (statistics.median(begun), max(begun)),
+        "delimiter p50/max us": (statistics.median(ended), max(ended)),
+    }
+    assert max(ended) <= SAMPLE_PERIOD_US, figures
+
+
+def test_the_relay_drops_one_lease_after_the_last_host_byte(
+    firmware_board: tuple[EmulatedBoard, Path],
+) -> None:
+    """Session, lease 100 ms, torch on (the tip far above the plate: a pilot only), then
+    silence, as when the daemon is SIGKILLed: the relay pin falls 100 ms (+ at most one
+    sample period) after the last host frame reached the UART, by the record's clock."""
+    board, tmp = firmware_board
+    board.command("z 60")
+    link = RawLink(tmp / "board.pty")
+    try:
+        link.request(fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 0x1234), fp.HelloInfo)
+        link.request(fp.SetLease(2, 100), fp.Ack)
+        status = link.request(fp.Query(3, fp.QueryWhat.STATUS), fp.Status)
+        if status.faults:
+            link.request(fp.FaultReset(4, status.faults), fp.Ack)
+        link.request(fp.Torch(5, True), fp.Ack)
+        assert board.status().torch
+        time.sleep(0.4)
+    finally:
+        link.close()
+    assert not board.status().torch
+    delay_us = relay_off_after_last_host_byte_us(read_record(tmp / "record.csv"))
+    assert delay_us is not None
+    assert 100_000 <= delay_us <= 100_000 + SAMPLE_PERIOD_US + 250, delay_us
