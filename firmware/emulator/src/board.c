@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "avr_adc.h"
+#include "avr_extint.h"
 #include "avr_ioport.h"
 #include "avr_uart.h"
 #include "sim_cycle_timers.h"
@@ -320,6 +321,31 @@ static void hook_enable_registers(struct emu *e)
 	}
 }
 
+/*
+ * simavr polls an external interrupt pin in "strict level" mode while it is LOW (an ioctl
+ * walking every module, each few cycles) even with the interrupt disabled; on the 328P
+ * STEP and DIR are INT0/INT1 (PD2/PD3) and sit LOW, which cost 5x the CPU. Our outputs are
+ * never interrupt inputs, so their INTs drop to edge-only level handling.
+ */
+static void relax_output_extints(struct emu *e)
+{
+	avr_extint_t *ext = NULL;
+	for (avr_io_t *io = e->avr->io_port; io; io = io->next)
+		if (!strcmp(io->kind, "extint"))
+			ext = (avr_extint_t *)io;
+	if (!ext)
+		return;
+	const struct pin_ref *outs[] = {&e->step, &e->dir, &e->torch, &e->ohmic_en, &e->z_en};
+	for (int i = 0; i < EXTINT_COUNT; i++) {
+		if (!ext->eint[i].port_ioctl)
+			continue;
+		char port = (char)(ext->eint[i].port_ioctl & 0xFF);
+		for (size_t k = 0; k < sizeof outs / sizeof outs[0]; k++)
+			if (outs[k]->port == port && outs[k]->bit == ext->eint[i].port_pin)
+				avr_extint_set_strict_lvl_trig(e->avr, (uint8_t)i, 0);
+	}
+}
+
 static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 {
 	(void)avr;
@@ -389,6 +415,7 @@ int board_init(struct emu *e)
 		if (e->in_present[i] && bind_pin(e, &e->in_pins[i], p->in[i], input_name(i)))
 			return -1;
 	}
+	relax_output_extints(e);
 	avr_irq_register_notify(e->step.irq, step_hook, e);
 	avr_irq_register_notify(e->dir.irq, dir_hook, e);
 	avr_irq_register_notify(e->torch.irq, torch_hook, e);

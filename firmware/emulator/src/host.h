@@ -142,6 +142,7 @@ struct emu {
 	int ctl_eof;
 
 	/* pacing */
+	double speed; /* simulated seconds per wall second; 0: flat out */
 	double wall_t0;
 	uint64_t sim_t0_cycles;
 	uint64_t lag_events;

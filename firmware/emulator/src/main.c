@@ -21,7 +21,7 @@
 
 #include "host.h"
 
-#define SLICE_US 50
+#define SLICE_US 100
 #define MAX_LAG_S 1.0
 #define PARENT_CHECK_S 0.1
 #define Z_RECORD_US 10000
@@ -50,6 +50,7 @@ static void usage(FILE *f)
 		"       [--arc-slope-v-mm S] [--cut-v V] [--cut-height-mm H] [--noise-v SIGMA]\n"
 		"       [--arc-ok-delay-ms MS] [--float-travel-mm MM] [--ocv-v V]\n"
 		"       [--transfer-max-mm MM] [--lose-above-mm MM] [--pilot-timeout-ms MS]\n"
+		"       [--speed FACTOR (simulated per wall second; 0: flat out, for benchmarks)]\n"
 		"Runs a firmware ELF on simavr at 16 MHz, UART0 on a pty symlinked at PATH, paced to\n"
 		"the wall clock. Control commands on stdin (help: firmware/emulator/README.md).\n"
 		"SIGUSR2 resets the MCU (external reset); SIGTERM/SIGINT exit.\n");
@@ -59,6 +60,7 @@ enum {
 	OPT_ELF = 1000, OPT_PTY, OPT_MCU, OPT_RECORD, OPT_SEED, OPT_PLATE, OPT_WARP,
 	OPT_WARP_PERIOD, OPT_SLOPE, OPT_CUT_V, OPT_CUT_H, OPT_NOISE, OPT_ARC_OK_DELAY,
 	OPT_FLOAT_TRAVEL, OPT_OCV, OPT_TRANSFER_MAX, OPT_LOSE_ABOVE, OPT_PILOT_TIMEOUT, OPT_HELP,
+	OPT_SPEED,
 };
 
 static const struct option long_opts[] = {
@@ -80,6 +82,7 @@ static const struct option long_opts[] = {
 	{"transfer-max-mm", required_argument, 0, OPT_TRANSFER_MAX},
 	{"lose-above-mm", required_argument, 0, OPT_LOSE_ABOVE},
 	{"pilot-timeout-ms", required_argument, 0, OPT_PILOT_TIMEOUT},
+	{"speed", required_argument, 0, OPT_SPEED},
 	{"help", no_argument, 0, OPT_HELP},
 	{0, 0, 0, 0},
 };
@@ -117,6 +120,7 @@ static int parse_args(struct emu *e, int argc, char **argv)
 	};
 	e->mcu = "atmega2560";
 	e->seed = 1;
+	e->speed = 1.0;
 	int c;
 	while ((c = getopt_long(argc, argv, "", long_opts, NULL)) != -1) {
 		double v = 0;
@@ -128,6 +132,12 @@ static int parse_args(struct emu *e, int argc, char **argv)
 		case OPT_MCU: e->mcu = optarg; continue;
 		case OPT_RECORD: e->record_path = optarg; continue;
 		case OPT_HELP: usage(stdout); exit(0);
+		case OPT_SPEED:
+			if (number("speed", optarg, &e->speed) || e->speed < 0.0) {
+				fprintf(stderr, "dthc-emulated-board-host: --speed: a factor >= 0\n");
+				return -1;
+			}
+			continue;
 		case OPT_SEED:
 			if (number("seed", optarg, &v))
 				return -1;
@@ -213,10 +223,14 @@ static int run(struct emu *e)
 			board_reset(e, 0);
 		}
 		double now_s = mono_s();
-		double target = (double)sim0 + (now_s - t0) * (double)EMU_FREQUENCY_HZ;
+		double target = e->speed > 0.0
+					? (double)sim0 + (now_s - t0) * e->speed * (double)EMU_FREQUENCY_HZ
+					: 1e30; /* --speed 0: flat out */
 		uint64_t cycles = board_cycles(e);
 		if ((double)cycles < target) {
-			double lag_s = (target - (double)cycles) / (double)EMU_FREQUENCY_HZ;
+			double lag_s = e->speed > 0.0 ? (target - (double)cycles) /
+								(e->speed * (double)EMU_FREQUENCY_HZ)
+						       : 0.0;
 			if (lag_s > e->max_lag_s)
 				e->max_lag_s = lag_s;
 			if (lag_s > MAX_LAG_S) {
@@ -236,7 +250,10 @@ static int run(struct emu *e)
 			}
 			board_apply_inputs(e, 0);
 			pty_flush_tx(e);
-			read_pty(e);
+			/* Ahead of the wall clock, ppoll below wakes on host bytes at once; behind it
+			 * (catching up), look for them every other slice. */
+			if (slices & 1)
+				read_pty(e);
 			uint64_t t = board_us(e);
 			if (t >= e->next_z_record_us) {
 				record_event(e, "z", "%lld",
@@ -248,7 +265,8 @@ static int run(struct emu *e)
 			if ((++slices & 15) == 0)
 				control_poll(e);
 		} else {
-			double ahead_s = ((double)cycles - target) / (double)EMU_FREQUENCY_HZ;
+			double ahead_s =
+				((double)cycles - target) / (e->speed * (double)EMU_FREQUENCY_HZ);
 			struct timespec ts = {
 				.tv_sec = (time_t)ahead_s,
 				.tv_nsec = (long)((ahead_s - (double)(time_t)ahead_s) * 1e9)};
