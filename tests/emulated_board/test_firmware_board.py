@@ -84,14 +84,11 @@ def firmware_board(
         board.stop()
 
 
-def test_the_conformance_suite_passes_against_the_firmware(
-    firmware_board: tuple[EmulatedBoard, Path],
-) -> None:
-    """``dthc-bridge conformance`` (every check, SIGUSR2 for the reset check) passes
-    against the firmware ELF on the emulated board."""
-    board, tmp = firmware_board
+def run_conformance(board: EmulatedBoard, pty: Path) -> None:
+    """``dthc-bridge conformance`` (every check, SIGUSR2 for the reset check) against the
+    board; fails naming every failed check with its figures."""
     done = subprocess.run(
-        [sys.executable, "-m", "dthc_bridge.conformance", str(tmp / "board.pty"), "--yes",
+        [sys.executable, "-m", "dthc_bridge.conformance", str(pty), "--yes",
          "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json"],
         capture_output=True, text=True, timeout=120, check=False,
     )  # fmt: skip
@@ -99,6 +96,23 @@ def test_the_conformance_suite_passes_against_the_firmware(
     failed = [f"{c['name']}: {c['figure']}" for c in report["checks"] if not c["passed"]]
     assert not failed, failed
     assert done.returncode == 0
+
+
+def test_the_conformance_suite_passes_against_the_mega_firmware(
+    firmware_board: tuple[EmulatedBoard, Path],
+) -> None:
+    """Every conformance check passes against the Mega 2560 ELF on the emulated board."""
+    board, tmp = firmware_board
+    run_conformance(board, tmp / "board.pty")
+
+
+def test_the_conformance_suite_passes_against_the_nano_firmware(
+    firmware_board: tuple[EmulatedBoard, Path], tmp_path: Path
+) -> None:
+    """Every conformance check passes against the ATmega328P (Nano/Uno) ELF too."""
+    options = HarnessOptions(mcu="atmega328p", build=False, stderr=tmp_path / "host.log")
+    with EmulatedBoard(tmp_path / "nano.pty", options) as board:
+        run_conformance(board, tmp_path / "nano.pty")
 
 
 @pytest.fixture(scope="module")
