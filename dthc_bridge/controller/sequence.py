@@ -80,7 +80,10 @@ class SequenceConfig:
     puddle_delay_s: float = 0.0
     ihs_skip_distance_mm: float = 0.0  # 0: always touch off
     ihs_skip_type: int = 0  # 0: from the end of the last cut (THC on), 1: from its start
-    auto_voltage_window_s: float = 0.03
+    # Auto voltage: the mean filtered voltage over this window, taken as soon as the machine
+    # is at speed (and at least auto_voltage_after_s after arc OK), not after the THC delay.
+    auto_voltage_window_s: float = 0.05
+    auto_voltage_after_s: float = 0.5  # from arc OK: past the start transient's peak
     at_speed_settle_s: float = 0.15
     dry_run: bool = False
     # Mode 0 (arc OK from voltage): window and agreement, docs/plasma-facts.md
@@ -101,7 +104,7 @@ class _Cut:
     cutting_since: float | None = None
     at_speed_since: float | None = None
     thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
-    auto_v: deque[float] = field(default_factory=lambda: deque(maxlen=50))
+    auto_v: list[float] = field(default_factory=list)
     auto_v_since: float | None = None
     relit: bool = False
     ohmic_failed: int = 0
@@ -665,18 +668,22 @@ class CutSequence:
         settled = (
             cut.at_speed_since is not None and now - cut.at_speed_since >= cfg.at_speed_settle_s
         )
-        # The THC delay guards the start transient, so it counts from arc OK; the target is
-        # taken at the first moment after it with the machine at speed, before the plate
-        # has had time to drift away from the height that was just probed.
+        # The THC delay guards the start transient, so it counts from arc OK. A fixed target
+        # applies once the delay is over and the machine at speed; an auto target is taken
+        # as early as the transient allows, before the plate has drifted away from the
+        # height that was just probed (see _acquire_target), and the THC starts after the
+        # delay like the fixed one.
         arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
         delay_done = now - arc_ok_since >= cfg.thc_delay_s
         arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled or cut.torch_out
-        self.thc.frozen = self.thc.target_v is None or arc_lost_running
-        if delay_done and settled and self.thc.target_v is None:
+        auto = self.params.cut_voltage_v is None
+        may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s if auto else delay_done
+        self.thc.frozen = self.thc.target_v is None or arc_lost_running or not delay_done
+        if may_acquire and settled and self.thc.target_v is None:
             self.thc.filter(volts, period_s, now)
             self._acquire_target(now)
             if self.thc.target_v is not None:
-                self.thc.frozen = arc_lost_running
+                self.thc.frozen = arc_lost_running or not delay_done
             velocity = 0.0
         elif self.mode is ThcMode.ARC_OK_AND_UPDOWN:
             self.thc.filter(volts, period_s, now)
@@ -713,9 +720,18 @@ class CutSequence:
         if fixed is not None:
             self.thc.target_v = fixed + self._override_v()
             return
-        # Auto voltage (G200 V0, G100 P5 A1): the mean of the filtered voltage over a short
-        # window at speed; short, because the plate drifts under a torch that holds still.
+        # Auto voltage (G200 V0, G100 P5 A1). Z has held the cut height set over the probed
+        # point since the cut started, so the voltage to hold is the one of the first
+        # centimetres: a warped plate drifts away under the held torch, and sampling after
+        # the THC delay (as PlasmaC does) put that drift into the target. So the mean over
+        # a short window as soon as the machine is at speed and the start transient has
+        # had auto_voltage_after_s; a window a void lock (a kerf, a spike) touches starts
+        # again.
         cfg = self.config
+        if Lock.VOID in self.thc.locks(now):
+            cut.auto_v.clear()
+            cut.auto_v_since = None
+            return
         if cut.auto_v_since is None:
             cut.auto_v_since = now
         filtered = self.thc.filtered_v

@@ -3,7 +3,8 @@
 The goals are judged against LinuxCNC's real plasmac (:mod:`.plasmac`), per scenario and
 per seed (the worst seed counts, not the mean): ours ≤ 0.5 x plasmac's RMS height error and
 ≤ 0.6 x its max error, no dive, no pause that plasmac does not make as well; ours with auto
-volts against plasmac's auto volts the same way. The open controllers' law as we re-wrote
+volts against plasmac's auto volts the same way on the warped plates
+(:data:`AUTO_GOAL_SCENARIOS`). The open controllers' law as we re-wrote
 it (``reference``) stays as a second baseline with its own goal (ours ≤ 0.6 x its RMS).
 """
 
@@ -17,6 +18,7 @@ from .cuts import ControllerResult, CutPlan, merge
 from .report import Goal, goals_block
 
 __all__ = [
+    "AUTO_GOAL_SCENARIOS",
     "CONTROLLERS",
     "MAX_RATIO_VS_PLASMAC",
     "PAIRS",
@@ -32,6 +34,9 @@ PAIRS = (("ours", "plasmac"), ("ours_auto", "plasmac_auto"))  # (ours, its peer)
 RMS_RATIO_GOAL = 0.6  # ours / reference, per scenario over the seeds
 RMS_RATIO_VS_PLASMAC = 0.5  # ours / plasmac, every scenario and seed
 MAX_RATIO_VS_PLASMAC = 0.6
+# Auto volts are judged where the plate drifts under the torch while the target is taken
+# (issue 18, part 4); elsewhere they are reported.
+AUTO_GOAL_SCENARIOS = ("warped_sheet", "masso_warped")
 
 
 @dataclass(frozen=True)
@@ -160,7 +165,8 @@ def summarize(
         goals.append(Goal("dives", float(_total(counted, "ours", "dives")), 0, at_most=True))
     for ours, peer in PAIRS:
         key = f"{ours}_vs_{peer}"
-        blocks = [b for s in counted if isinstance(b := s.get(key), Mapping)]
+        judged = [s for s in counted if ours == "ours" or s["scenario"] in AUTO_GOAL_SCENARIOS]
+        blocks = [b for s in judged if isinstance(b := s.get(key), Mapping)]
         if not blocks:
             continue
         rms = [r for b in blocks if (r := _num(b["worst_rms_ratio"])) is not None]
@@ -178,7 +184,7 @@ def summarize(
             Goal(f"pauses_plasmac_did_not_make{suffix}", float(unmatched), 0, at_most=True),
         ]
         if ours in kinds:
-            goals.append(Goal(f"dives_{ours}", float(_total(counted, ours, "dives")), 0, True))
+            goals.append(Goal(f"dives_{ours}", float(_total(judged, ours, "dives")), 0, True))
     out["plasmac"] = dict(plasmac)
     out["goals"] = goals_block(goals)
     return out
