@@ -79,6 +79,8 @@ DEFAULT_SCENARIOS = (
     "noisy_hf_start",
     "painted_plate",
     "masso_warped",
+    "nested_kerfs",
+    "flexing_sheet",
 )
 # Ends in an arc loss by design: run and reported, but outside the goals (the cut faults
 # 2 s after transfer, for every controller, with the THC active for about 1 s).

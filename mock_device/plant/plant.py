@@ -99,7 +99,11 @@ class Plant:
         x, y = self.gantry.x_mm, self.gantry.y_mm
         self._cache_x = x
         self._cache_y = y
-        self.surface_z_mm = self.surface.height_mm(x, y)
+        self._flex_mm = scenario.plate.flex_amplitude_mm
+        self._flex_w = 2.0 * math.pi / scenario.plate.flex_period_s
+        self._flex_start_s = scenario.plate.flex_start_s
+        self._base_z_mm = self.surface.height_mm(x, y)
+        self.surface_z_mm = self._base_z_mm
         self._gap_kind = self.surface.gap_kind(x, y)
         self.head.update(self.zaxis.position_mm, self.surface_z_mm, False, 0.0)
 
@@ -148,8 +152,11 @@ class Plant:
         if x != self._cache_x or y != self._cache_y:
             self._cache_x = x
             self._cache_y = y
-            self.surface_z_mm = self.surface.height_mm(x, y)
+            self._base_z_mm = self.surface_z_mm = self.surface.height_mm(x, y)
             self._gap_kind = self.surface.gap_kind(x, y)
+        if self._flex_mm and self._first_transfer_t_s is not None:
+            phase = self._flex_w * max(0.0, t - self._first_transfer_t_s - self._flex_start_s)
+            self.surface_z_mm = self._base_z_mm + 0.5 * self._flex_mm * (1.0 - math.cos(phase))
         head = self.head
         head.update(zaxis.position_mm, self.surface_z_mm, self._ohmic_sense, dt_s)
         arc = self.arc

@@ -111,7 +111,13 @@ class WaveSpec:
 
 @dataclass(frozen=True, slots=True)
 class PlateSpec:
-    """The plate: nominal top in machine Z, size from the origin, tilt about the origin."""
+    """The plate: nominal top in machine Z, size from the origin, tilt about the origin.
+
+    A thin sheet flexes under the heat of the cut: ``flex_start_s`` after the first arc
+    transfer (the heat has built up), the whole sheet lifts by
+    ``flex_amplitude_mm * (1 - cos(2π·t/flex_period_s)) / 2`` (up to the amplitude and
+    back, again and again), however the torch moves.
+    """
 
     top_mm: float = 20.0
     size_x_mm: float = _num(1250.0, gt=0.0)
@@ -119,6 +125,9 @@ class PlateSpec:
     tilt_x_mm_per_m: float = 0.0
     tilt_y_mm_per_m: float = 0.0
     waves: tuple[WaveSpec, ...] = ()
+    flex_amplitude_mm: float = _num(0.0, ge=0.0)
+    flex_period_s: float = _num(3.0, gt=0.0)
+    flex_start_s: float = _num(0.0, ge=0.0)
 
 
 @dataclass(frozen=True, slots=True)

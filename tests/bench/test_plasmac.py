@@ -138,3 +138,19 @@ def test_dbounce_needs_five_steady_periods() -> None:
     assert [db.update(v) for v in (True, True, False, False)] == [False] * 4
     assert [db.update(True) for _ in range(5)] == [False] * 4 + [True]
     assert db.update(False)  # one low period does not drop it
+
+
+def test_the_flexing_sheet_lifts_under_a_held_torch() -> None:
+    """flexing_sheet: 1.5 s after the first transfer the sheet lifts (up to 1 mm, 2.5 s
+    period) wherever the torch is; before it, and without an arc, it stays put."""
+    plant = Plant("flexing_sheet", seed=1)
+    base = plant.surface_z_mm
+    plant.zaxis.position_mm = base + 1.0
+    plant.set_torch(True)
+    plant.advance(1.0)
+    assert plant.arc.transfers == 1
+    assert plant.surface_z_mm == base
+    plant.advance(1.7)  # 0.5 s into the flex (transfer after 0.15-0.5 s): lifted
+    lifted = plant.surface_z_mm - base
+    assert 0.2 < lifted <= 1.0
+    assert plant.true_height_mm == pytest.approx(1.0 - lifted, abs=1e-9)

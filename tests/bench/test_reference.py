@@ -104,3 +104,14 @@ def test_kerf_spikes_below_the_void_threshold_drag_the_reference_down() -> None:
     assert isinstance(reference["max_mm"], float)
     assert reference["max_mm"] > 0.25
     assert reference["max_mm"] > 5 * ours["max_mm"]
+
+
+def test_on_nested_kerfs_ours_neither_dives_nor_stays_void_locked() -> None:
+    """nested_kerfs, the first 330 mm (four kerfs and the shallow one): no dive, and no
+    void lock lasts longer than the kerf under the torch (0.1 s at 92 mm/s)."""
+    plans = plan_cuts(load_scenario("nested_kerfs").default_program, max_path_mm=330)
+    ours = run_controller("nested_kerfs", 1, "ours", plans)
+    assert ours.as_dict()["dives"] == 0
+    assert ours.void.locks >= 4
+    assert ours.void.longest_s < 0.15
+    assert ours.void.false_locks == 0
