@@ -52,7 +52,8 @@ static unsigned rx_fifo_used(struct emu *e)
 	return ((unsigned)u->input.write - (unsigned)u->input.read) & (uart_fifo_fifo_size - 1u);
 }
 
-/* Cycles one 8N1 character takes at the baud rate the firmware set (UBRR0, U2X0). */
+/* Cycles one character takes at the baud rate and frame format the firmware set now
+ * (UBRR0, U2X0, UCSZ0, USBS0; no parity: the UART module keeps no parity setting). */
 static uint64_t byte_cycles(struct emu *e)
 {
 	avr_uart_t *u = uart_of(e);
@@ -61,7 +62,24 @@ static uint64_t byte_cycles(struct emu *e)
 	if (u->ubrrh.reg)
 		ubrr |= (unsigned)(avr->data[u->ubrrh.reg] & 0x0f) << 8;
 	unsigned div = avr_regbit_get(avr, u->u2x) ? 8u : 16u;
-	return (uint64_t)(ubrr + 1u) * div * 10u;
+	static const unsigned data_bits[8] = {5, 6, 7, 8, 8, 8, 8, 9};
+	unsigned size = avr_regbit_get(avr, u->ucsz) | (avr_regbit_get(avr, u->ucsz2) << 2);
+	unsigned bits = 1u + data_bits[size & 7u] + 1u + (avr_regbit_get(avr, u->usbs) ? 1u : 0u);
+	return (uint64_t)(ubrr + 1u) * div * bits;
+}
+
+/*
+ * simavr computes the UART's character time only when UBRRnL is written, from the U2X bit
+ * of that moment, and counts a parity bit that 8N1 does not have: a firmware that sets
+ * UBRR before U2X (as the datasheet's examples allow) transmitted at half its baud rate
+ * (22 us per byte at 1 Mbaud). The host keeps it at what the registers say now.
+ */
+static void sync_uart_timing(struct emu *e)
+{
+	avr_uart_t *u = uart_of(e);
+	avr_cycle_count_t c = (avr_cycle_count_t)byte_cycles(e);
+	if (u->cycles_per_byte != c)
+		u->cycles_per_byte = c;
 }
 
 static avr_cycle_count_t wake_timer(struct avr_t *avr, avr_cycle_count_t when, void *param)
@@ -514,6 +532,7 @@ void board_run_until(struct emu *e, uint64_t end_cycles)
 {
 	avr_t *avr = e->avr;
 	wake_at(e, end_cycles, &wake_slice_tag);
+	sync_uart_timing(e);
 	for (;;) {
 		uint64_t raw = avr->cycle;
 		if (raw < e->last_raw_cycle) /* simavr restarted its counter (a watchdog reset) */
