@@ -254,3 +254,21 @@ def test_a_timer_tick_raised_while_masked_fires_when_unmasked(selftest_board: Bo
     reply = client.ask("K")
     assert reply.startswith("K")
     assert 28 <= int(reply[1:]) <= 31, reply
+
+
+def test_a_watchdog_reset_keeps_the_inputs_and_z(selftest_board: Board) -> None:
+    """The program lets its watchdog bite: it restarts with MCUSR = WDRF (0x08), and the
+    host re-drives the pins simavr cleared, so inputs read as the model says (none active,
+    the forced one active) and Z is where it was."""
+    board, client, tmp = selftest_board
+    board.command("z 42")
+    board.set_input("breakaway", True)
+    try:
+        assert client.ask("W") == "W"
+        assert client.read_line(2.0) == b"BOOT 8"
+        assert client.ask("I") == "I8"
+        assert board.status().z_um == 42_000
+    finally:
+        board.set_input("breakaway", None)
+    events = read_record(tmp / "record.csv")
+    assert any(e.event == "reboot" and e.fields == ("internal",) for e in events)

@@ -16,6 +16,7 @@
  *   K         -> K<n>                         Timer1 compare ticks (1 ms) counted over 20
  *                                             rounds of: tick masked 1.2 ms, unmasked 0.3 ms
  *                                             (an AVR takes a masked tick on unmask: ~30)
+ *   W         -> W, then hangs: the watchdog (15 ms) resets the MCU
  *   F         -> 0x00, a COBS frame (PROTOCOL.md §9's ACK of seq 4), then F
  * A 0x00 byte (a frame delimiter) ends a line without a reply: frames sent to it are
  * swallowed, so a test can send real frames and read the host's record of them.
@@ -23,6 +24,7 @@
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/wdt.h>
 #include <stdint.h>
 #include <stdlib.h>
 
@@ -234,6 +236,11 @@ static void command(char *line, uint8_t len)
 		put('K');
 		put_dec(masked_ticks());
 		break;
+	case 'W':
+		puts_("W\n");
+		wdt_enable(WDTO_15MS);
+		for (;;)
+			;
 	case 'R':
 		put('R');
 		put_hex(boot_mcusr);
@@ -249,6 +256,7 @@ int main(void)
 {
 	boot_mcusr = MCUSR;
 	MCUSR = 0;
+	wdt_disable(); /* a watchdog reset leaves it running */
 	OUT_INIT(PIN_STEP);
 	OUT_INIT(PIN_DIR);
 	OUT_INIT(PIN_TORCH);

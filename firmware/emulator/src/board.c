@@ -370,6 +370,19 @@ static void no_sleep(avr_t *avr, avr_cycle_count_t how_long)
 	(void)how_long; /* the host paces simulated time to the wall clock itself */
 }
 
+static struct emu *the_emu; /* one board per process: simavr's reset hook has no param */
+
+/* Wraps the core's reset hook: a reset simavr makes by itself (the watchdog) must get the
+ * same fix-ups as ours (pins re-driven, relay seen off, inputs written back). */
+static void reset_hook(avr_t *avr)
+{
+	if (the_emu->core_reset)
+		the_emu->core_reset(avr);
+	the_emu->reset_seen = 1;
+}
+
+static void after_reset(struct emu *e, const char *why);
+
 int board_init(struct emu *e)
 {
 	elf_firmware_t fw;
@@ -400,6 +413,9 @@ int board_init(struct emu *e)
 	e->avr->vcc = e->avr->avcc = e->avr->aref = (uint32_t)e->pins->adc_ref_mv;
 	e->avr->sleep = no_sleep;
 	e->avr->log = 1; /* warnings only */
+	the_emu = e;
+	e->core_reset = e->avr->reset;
+	e->avr->reset = reset_hook;
 	hook_enable_registers(e);
 
 	find_ios(e);
@@ -505,9 +521,17 @@ void board_reset(struct emu *e, int power_on)
 	e->last_raw_cycle = after;
 	e->avr->state = cpu_Running;
 	e->avr->data[MCUSR_ADDR] = power_on ? MCUSR_PORF : MCUSR_EXTRF;
+	after_reset(e, power_on ? "power_on" : "external_reset");
+}
+
+/* After any reset: simavr cleared the I/O registers behind the pins' IRQ values. */
+static void after_reset(struct emu *e, const char *why)
+{
+	e->reset_seen = 0;
 	set_uart_flags(e);
+	relax_output_extints(e);
 	e->reboots++;
-	record_event(e, "reboot", "%s", power_on ? "power_on" : "external_reset");
+	record_event(e, "reboot", "%s", why);
 	/* Pins are inputs after a reset: the relay driver, STEP and ENA- see no drive. */
 	avr_raise_irq(e->torch.irq, 0);
 	avr_raise_irq(e->ohmic_en.irq, 0);
@@ -544,6 +568,13 @@ void board_run_until(struct emu *e, uint64_t end_cycles)
 		if (e->rx_len && now >= e->rx_next_cycle)
 			deliver_rx(e);
 		int state = avr_run(avr);
+		if (e->reset_seen) { /* the watchdog (or the firmware) reset the MCU */
+			uint64_t raw_now = avr->cycle;
+			if (raw_now < e->last_raw_cycle)
+				e->cycle_base += e->last_raw_cycle - raw_now;
+			e->last_raw_cycle = raw_now;
+			after_reset(e, "internal");
+		}
 		if (state != cpu_Running && state != cpu_Sleeping)
 			break;
 	}

@@ -103,6 +103,9 @@ struct emu {
 	uint64_t cycle_base; /* cycles before the last reset (simavr may restart its counter) */
 	uint64_t last_raw_cycle;
 	int xoff;
+	void (*core_reset)(struct avr_t *avr); /* the core's own reset hook, wrapped */
+	int reset_seen; /* simavr reset the MCU (ours, or its watchdog's) */
+	int resetting; /* inside board_reset */
 
 	/* pins */
 	struct pin_ref in_pins[IN_COUNT];
