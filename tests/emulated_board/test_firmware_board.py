@@ -196,3 +196,42 @@ def test_the_relay_drops_one_lease_after_the_last_host_byte(
     delay_us = relay_off_after_last_host_byte_us(read_record(tmp / "record.csv"))
     assert delay_us is not None
     assert 100_000 <= delay_us <= 100_000 + SAMPLE_PERIOD_US + 250, delay_us
+
+
+def test_a_torch_lit_at_cut_height_reports_arc_ok_and_the_cut_voltage(
+    firmware_board: tuple[EmulatedBoard, Path],
+) -> None:
+    """The tip 1.5 mm over the plate, torch on: after the pilot the arc transfers, the
+    firmware reports ARC_OK in its SAMPLES and arc volts near the model's 116 V (within the
+    10-bit ADC's 0.24 V steps and the noise); torch off: 0 V, ARC_OK gone."""
+    board, tmp = firmware_board
+    board.command("plate 20")
+    board.command("z 21.5")
+    link = RawLink(tmp / "board.pty")
+    try:
+        link.request(fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 0x4321), fp.HelloInfo)
+        link.request(fp.SetLease(7, 2000), fp.Ack)
+        status = link.request(fp.Query(2, fp.QueryWhat.STATUS), fp.Status)
+        if status.faults:
+            link.request(fp.FaultReset(3, status.faults), fp.Ack)
+        link.request(fp.Torch(4, True), fp.Ack)
+        time.sleep(0.3)
+        lit = link.request(fp.Query(5, fp.QueryWhat.STATUS), fp.Status)
+        batches = [m for m in link.decoder.feed(b"") if isinstance(m, fp.Samples)]
+        deadline = time.monotonic() + 0.5
+        while len(batches) < 10 and time.monotonic() < deadline:
+            ready, _, _ = select.select([link.fd], [], [], 0.02)
+            if ready:
+                batches += [
+                    m for m in link.decoder.feed(os.read(link.fd, 4096))
+                    if isinstance(m, fp.Samples)
+                ]  # fmt: skip
+        link.request(fp.Torch(6, False), fp.Ack)
+    finally:
+        link.close()
+        board.command("z 60")
+    assert lit.inputs & (1 << fp.InputBit.ARC_OK)
+    volts = [cv / 100 for b in batches for cv in b.samples_cv]
+    assert volts
+    assert abs(statistics.mean(volts) - 116.0) < 1.5, statistics.mean(volts)
+    assert all(b.inputs & (1 << fp.InputBit.ARC_OK) for b in batches)
