@@ -155,8 +155,9 @@ def test_the_record_times_each_status_reply(status_delays_us: tuple[list[int], l
 
 
 @pytest.mark.xfail(
-    reason="firmware finding (2026-11-25): a STATUS is complete p50 1.7 ms, max 2.6-6 ms "
-    "after a lone QUERY in simulated time; PROTOCOL.md §8 allows 1 ms unloaded",
+    reason="firmware finding (2026-11-25): a STATUS is complete p50 1.0 ms, max 2.0 ms "
+    "after a lone QUERY in simulated time (first byte p50 0.6 ms); PROTOCOL.md §8 allows 1 ms "
+    "unloaded",
     strict=False,
 )
 def test_status_replies_are_sent_within_a_millisecond(
