@@ -106,6 +106,31 @@ def test_arc_transfers_near_the_plate_and_reads_cut_voltage(selftest_board: Boar
     assert board.status().arc == "off"
 
 
+def test_warp_moves_the_plate_under_the_cutting_torch(selftest_board: Board) -> None:
+    """``warp 1 0.2``: while the arc is transferred the plate's surface swings ±1 mm over
+    0.2 s, so at a fixed Z the arc voltage swings about ±7.5 V around the cut voltage."""
+    board, client, _ = selftest_board
+    board.command("plate 20")
+    board.command("z 21.5")
+    board.command("warp 1 0.2")
+    client.ask("T1")
+    try:
+        deadline = time.monotonic() + 2.0
+        while board.status().arc != "transferred":
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        volts = []
+        for _ in range(40):
+            volts.append(int(client.ask("A")[1:]) * 5000 / 1023 * DIVIDER / 1000)
+            time.sleep(0.006)
+    finally:
+        client.ask("T0")
+        board.command("warp 0 0")
+        board.command("z 60")
+    assert max(volts) - min(volts) > 12.0, volts
+    assert 112.0 < statistics.mean(volts) < 120.0, volts
+
+
 @pytest.mark.parametrize(
     ("name", "bit"),
     [("breakaway", 3), ("thc_up", 4), ("thc_down", 5), ("estop", 6), ("z_limit_min", 7),
