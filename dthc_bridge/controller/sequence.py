@@ -668,17 +668,19 @@ class CutSequence:
         settled = (
             cut.at_speed_since is not None and now - cut.at_speed_since >= cfg.at_speed_settle_s
         )
-        # The THC delay guards the start transient, so it counts from arc OK. A fixed target
-        # applies once the delay is over and the machine at speed; an auto target is taken
-        # as early as the transient allows, before the plate has drifted away from the
-        # height that was just probed (see _acquire_target), and the THC starts after the
-        # delay like the fixed one.
+        # The THC delay guards the start transient, so it counts from arc OK; until it is
+        # over the THC may only raise the torch (ThcController.rise_only). A fixed target
+        # applies from the start; an auto target is taken as early as the transient allows,
+        # before the plate has drifted away from the height that was just probed (see
+        # _acquire_target).
         arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
         delay_done = now - arc_ok_since >= cfg.thc_delay_s
         arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled or cut.torch_out
-        auto = self.params.cut_voltage_v is None
-        may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s if auto else delay_done
+        if self.params.cut_voltage_v is not None and self.thc.target_v is None:
+            self._acquire_target(now)  # known from the start: the THC may raise the torch
+        may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s
         self.thc.frozen = self.thc.target_v is None or arc_lost_running or not delay_done
+        self.thc.rise_only = not arc_lost_running and not delay_done
         if may_acquire and settled and self.thc.target_v is None:
             self.thc.filter(volts, period_s, now)
             self._acquire_target(now)

@@ -115,6 +115,9 @@ class _State:
     slow_travel_mm: float = 0.0  # Z travel while following, summed over the cut
 
 
+_DELAY_ONLY = frozenset({Lock.FROZEN})
+
+
 class ThcController:
     def __init__(self, config: ThcConfig | None = None) -> None:
         self.config = config or ThcConfig()
@@ -122,6 +125,10 @@ class ThcController:
         self.enabled = True
         self.frozen = True
         self.held = False  # operator pause: Z holds until released or the next cut
+        # During the THC delay (frozen, target known): raise the torch on a low voltage,
+        # never lower it. The start transient only ever raises the voltage, so a low one is
+        # the plate coming up under the held torch, the dangerous direction.
+        self.rise_only = False
         self.max_speed_mm_s = self.config.max_speed_mm_s
         self.anti_dive_percent = self.config.anti_dive_lock_percent
         # Downward Z travel allowed while following slow-downs, over a whole cut: the
@@ -135,6 +142,7 @@ class ThcController:
         self.target_v = None
         self.frozen = True
         self.held = False
+        self.rise_only = False
 
     def set_speed_limit(self, z_feed_mm_min: float | None) -> None:
         self.max_speed_mm_s = (
@@ -257,6 +265,8 @@ class ThcController:
                 lim = cfg.integral_limit_mm_s
                 s.integral_mm_s = max(-lim, min(lim, s.integral_mm_s))
                 command = cfg.kp_per_s * error_mm + s.integral_mm_s
+            elif self.rise_only and locks == _DELAY_ONLY and error_mm > 0.0:
+                command = cfg.kp_per_s * error_mm  # up only, and no integral yet
         limit = self.max_speed_mm_s
         command = max(-limit, min(limit, command))
         if s.slow_target_v is not None:

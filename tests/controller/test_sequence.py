@@ -309,8 +309,8 @@ def test_auto_voltage_is_taken_before_a_warped_plate_drifts_and_thc_waits_for_th
     """G200 V0 on a warped sheet: the target is taken as soon as the machine is at speed
     (about 0.7 s after arc OK, a few centimetres from the probed point), not after the THC
     delay (1 s), by when the plate under the held torch has drifted further: the target is
-    nearer the material's 122 V at cut height than the voltage at the end of the delay, and
-    Z holds until the delay is over."""
+    nearer the material's 122 V at cut height than the voltage at the end of the delay;
+    until the delay is over the THC never lowers the torch (it may raise it)."""
     loop = ready("warped_sheet", cut_voltage_v=None)
     assert loop.m3().ok
     line = "G1 X1100 Y100 F6000"
@@ -328,12 +328,15 @@ def test_auto_voltage_is_taken_before_a_warped_plate_drifts_and_thc_waits_for_th
     assert sequence.thc.frozen  # the THC delay still runs
     z = loop.plant.carriage_z_mm
     delay_end = arc_ok_s + sequence.config.thc_delay_s
-    loop.run_until(lambda: sequence.now >= delay_end - 0.01, 1)
-    assert loop.plant.carriage_z_mm == pytest.approx(z, abs=0.01)
+    lowest = z
+    while sequence.now < delay_end - 0.01:
+        loop.step()
+        lowest = min(lowest, loop.plant.carriage_z_mm)
+    assert lowest >= z - 0.005
     late = sequence.thc.filtered_v
     assert late is not None
     assert abs(target - 122.0) < 2.0
-    assert abs(target - 122.0) < abs(late - 122.0) - 0.5
+    assert abs(target - 122.0) < abs(late - 122.0)
     loop.run_until(lambda: not sequence.thc.frozen, 0.2)
     assert not sequence.thc.frozen
 

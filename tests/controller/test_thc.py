@@ -124,6 +124,24 @@ def test_disabled_or_frozen_thc_holds_z() -> None:
     assert step(thc, 100.0, 0.010) == 0.0
 
 
+def test_during_the_thc_delay_the_torch_may_only_rise() -> None:
+    """rise_only (the sequence sets it during the THC delay): a low voltage (the plate coming
+    up) raises the torch at once; a high one (the start transient, or the plate falling
+    away) leaves Z held; at the velocity lock Z holds whatever the voltage."""
+    thc = running()
+    thc.frozen = True
+    thc.rise_only = True
+    up = [step(thc, 115.0, 0.005 * i) for i in range(1, 40)]  # unlocked after 0.1 s at speed
+    assert up[-1] > 1.0
+    assert all(v >= 0.0 for v in up)
+    thc = running()
+    thc.frozen = True
+    thc.rise_only = True
+    assert all(step(thc, 135.0, 0.005 * i) == 0.0 for i in range(1, 20))
+    thc.observe_speed(50.0, 100.0, 0.2)  # slowing down: velocity lock
+    assert step(thc, 110.0, 0.205, speed=50.0) == 0.0
+
+
 # --- steady slow-downs -------------------------------------------------------------------
 
 
