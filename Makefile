@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker browser systemd-tools clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -39,6 +39,24 @@ systemd-tools:
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends systemd >/dev/null; } \
 	  || echo "systemd-analyze unavailable: its tests will be skipped"
 
+# The reference firmware is built with Debian's avr-gcc and tested as the very ELF users
+# flash, on simavr (an emulated ATmega): install the toolchain and simavr where missing.
+AVR_PACKAGES := gcc-avr avr-libc binutils-avr simavr libsimavr-dev libsimavrparts1 libelf-dev pkg-config
+avr-tools:
+	@{ command -v avr-gcc >/dev/null 2>&1 && command -v avr-size >/dev/null 2>&1 && \
+	  test -f /usr/include/simavr/sim_avr.h && test -f /usr/lib/avr/include/avr/io.h && \
+	  ls /usr/lib/*/libsimavr.so* >/dev/null 2>&1 && command -v pkg-config >/dev/null 2>&1 && \
+	  test -f /usr/include/libelf.h; } || { \
+	  echo "installing the AVR toolchain and simavr (apt-get)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $(AVR_PACKAGES) >/dev/null; }
+
+# The HEX and ELF a table owner flashes (Mega 2560 and Nano), their flash and RAM use, and
+# the emulated-board harness that runs them.
+firmware: avr-tools
+	$(MAKE) --no-print-directory -C firmware
+	$(MAKE) --no-print-directory -C firmware/emulator
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
@@ -49,7 +67,7 @@ typecheck: $(STAMP)
 unit: $(STAMP)
 	$(BIN)/pytest -q
 
-test: $(STAMP) broker browser systemd-tools lint typecheck unit
+test: $(STAMP) broker browser systemd-tools firmware lint typecheck unit
 
 bench: $(STAMP)
 	for suite in codec control latency soak faults fuzz scale; do $(BIN)/dthc-bridge bench $$suite --json; done

@@ -1,8 +1,9 @@
-"""The whole system on one machine: broker, mock board, daemon and sender, as in a shop.
+"""The whole system on one machine: broker, board, daemon and sender, as in a shop.
 
 Used by ``dthc-bridge demo``, the end-to-end tests and the soak benchmark. The broker is
-mosquitto when installed, otherwise an embedded amqtt broker; the mock board and the
-daemon run as their own processes on a pty; the sender runs here.
+mosquitto when installed, otherwise an embedded amqtt broker; the board (the mock board, or
+the reference firmware on an emulated MCU) and the daemon run as their own processes on a
+pty; the sender runs here.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ import aiomqtt
 
 from dthc_bridge.controller.dialect import Dialect
 
+from ..emulated_board.build import MCUS
+from ..emulated_board.harness import EmulatedBoard, HarnessOptions
 from ..procs import die_with_parent
 from ..sender import DaemonClient, Sender, SendReport, SimGantryBackend
 from ..sender.backend import MotionBackend
@@ -61,6 +64,22 @@ class StackOptions:
     # plant; the mock board then has no XY speed input and the sender reports the speed.
     motion: str = "sim"
     grbl_args: tuple[str, ...] = ()
+    # "mock": the mock board and its plant (ground truth). An MCU name ("atmega2560",
+    # "atmega328p"): the reference firmware's ELF on the emulated board (no XY, so the
+    # motion is grbl's), its plate and arc model set by ``board_model`` (the harness's
+    # option names, e.g. {"plate-mm": 20, "warp-mm": 0.5}); its record in board-record.csv.
+    board: str = "mock"
+    board_model: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.board != "mock" and self.board not in MCUS:
+            raise ValueError(f"board {self.board!r}: expected 'mock' or one of {MCUS}")
+        if self.board != "mock" and self.motion != "grbl":
+            raise ValueError("the emulated board has no XY: use motion='grbl'")
+
+    @property
+    def emulated(self) -> bool:
+        return self.board != "mock"
 
 
 @dataclass
@@ -153,6 +172,8 @@ class Stack:
         self.pty = self.workdir / "dthc0"
         self.truth = self.workdir / "truth.jsonl"
         self.mock: subprocess.Popen[str] | None = None
+        self.emulated_board: EmulatedBoard | None = None
+        self.board_record = self.workdir / "board-record.csv"
         self.daemon: subprocess.Popen[bytes] | None = None
         self.gantry_port = 0
         self.grbl: subprocess.Popen[str] | None = None
@@ -171,7 +192,10 @@ class Stack:
     async def __aenter__(self) -> Stack:
         if not self.broker_shared:
             await self.broker.start()
-        self._start_mock()
+        if self.options.emulated:
+            self._start_emulated_board()
+        else:
+            self._start_mock()
         if self.options.motion == "grbl":
             self._start_grbl()
         self._start_daemon()
@@ -192,6 +216,8 @@ class Stack:
             self.grbl.stdout.close()
         if self.mock is not None and self.mock.stdout is not None:
             self.mock.stdout.close()
+        if self.emulated_board is not None:
+            await asyncio.to_thread(self.emulated_board.stop)
         for handle in self._logs:
             handle.close()
         if not self.broker_shared:
@@ -213,10 +239,22 @@ class Stack:
             raise RuntimeError("the mock board did not start: see mock.log")
         self.gantry_port = int(next(w for w in ready if w.startswith("gantry=")).split("=")[1])
 
+    def _start_emulated_board(self) -> None:
+        options = HarnessOptions(
+            mcu=self.options.board, record=self.board_record, seed=self.options.seed,
+            model=self.options.board_model, stderr=self.workdir / "board.log",
+        )  # fmt: skip
+        self.emulated_board = EmulatedBoard(self.pty, options)
+        self.emulated_board.start()
+
     def _start_grbl(self) -> None:
+        # With the mock board, grbl's motion is mirrored into the mock's plant (its gantry).
+        plant = (
+            () if self.options.emulated else ("--plant", f"socket://127.0.0.1:{self.gantry_port}")
+        )
         self.grbl = subprocess.Popen(  # noqa: S603 - our own module, fixed arguments
             [sys.executable, "-m", "dthc_tools.grbl_emu", "--pty", str(self.grbl_pty),
-             "--plant", f"socket://127.0.0.1:{self.gantry_port}", *self.options.grbl_args],
+             *plant, *self.options.grbl_args],
             stdout=subprocess.PIPE, stderr=self._log("grbl.log"), text=True,
             preexec_fn=die_with_parent(),
         )  # fmt: skip
@@ -349,9 +387,9 @@ class Stack:
             return await daemon.request(name, **args)
 
     async def finish(self, report: SendReport | None = None) -> StackResult:
-        """Stop the daemon (SIGTERM, timed) and the mock; collect what happened."""
+        """Stop the daemon (SIGTERM, timed) and the board; collect what happened (the mock's
+        exit figures; none from the emulated board, whose record stays in board_record)."""
         assert self.daemon is not None
-        assert self.mock is not None
         await asyncio.sleep(0.3)  # let the last telemetry and state arrive
         t0 = time.monotonic()
         self.daemon.send_signal(signal.SIGTERM)
@@ -363,12 +401,15 @@ class Stack:
         if self.grbl is not None:  # its exit line (stats) goes to grbl.log
             self.grbl.send_signal(signal.SIGTERM)
             await asyncio.to_thread(self.grbl.wait, 10)
-        self.mock.send_signal(signal.SIGTERM)
-        await asyncio.to_thread(self.mock.wait, 10)
         mock_exit: dict[str, Any] = {}
-        for line in (self.workdir / "mock.log").read_text().splitlines():
-            if '"event": "exit"' in line:
-                mock_exit = json.loads(line)
+        if self.emulated_board is not None:
+            await asyncio.to_thread(self.emulated_board.stop)
+        if self.mock is not None:
+            self.mock.send_signal(signal.SIGTERM)
+            await asyncio.to_thread(self.mock.wait, 10)
+            for line in (self.workdir / "mock.log").read_text().splitlines():
+                if '"event": "exit"' in line:
+                    mock_exit = json.loads(line)
         return StackResult(
             report or SendReport(),
             mock_exit,

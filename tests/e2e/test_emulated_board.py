@@ -1,0 +1,277 @@
+"""The reference firmware's own ELF on the emulated Mega 2560, as a table owner runs it:
+mosquitto, the daemon process, the emulated board on a pty, an emulated grbl for X and Y
+and the reference sender running the MASSO sample program.
+
+What is judged comes from the harness's record of the MCU's pins (simulated time, and the
+host's monotonic clock for lining it up with the daemon's sequence events): the torch relay
+is on only inside the cuts; killed mid-cut, the daemon leaves the relay on no longer than
+the board's lease; a storm of garbage on the link neither resets nor wedges the board.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import random
+import select
+import time
+import tty
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import firmware_protocol as fp
+from dthc_bridge.config import BoardSettings
+from dthc_bridge.conformance.options import LEASE_TOLERANCE_US
+from dthc_tools.demo import Stack, StackOptions, program_lines
+from dthc_tools.emulated_board import EmulatedBoard, HarnessOptions, read_record
+from dthc_tools.emulated_board.harness import RecordEvent, relay_off_after_last_host_byte_us
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
+
+SAMPLE_PERIOD_US = 1000
+BAUD = 1_000_000  # the firmware's UART (firmware/avr/pins.h)
+# The plate under the torch rises and falls 0.3 mm every 4 s while the arc burns; the
+# MASSO sample pierces 10 mm high (G200 P10), so the pilot reaches 12 mm (as the mock's
+# masso_warped scenario).
+BOARD_MODEL = {
+    "plate-mm": 20.0, "warp-mm": 0.3, "warp-period-s": 4.0, "transfer-max-mm": 12.0,
+    "lose-above-mm": 12.0,
+}  # fmt: skip
+# The states in which the daemon may have the torch lit (from TORCH on to the end of a cut).
+LIT_STATES = frozenset(
+    {"torch_on", "arc_wait", "pierce_delay", "puddle_jump", "to_cut_height", "cutting",
+     "pause_at_end", "s1_raise", "s1_wait_cycle_start", "s1_lower"}
+)  # fmt: skip
+# Slack between the board's pin (the record's monotonic time) and the daemon's MQTT event
+# reaching the test: the event follows the relay's change by the link and broker hops.
+EVENT_SLACK_S = 0.25
+
+
+def emulated_stack(tmp_path: Path) -> StackOptions:
+    return StackOptions(
+        tmp_path, broker="mosquitto", motion="grbl", board="atmega2560", board_model=BOARD_MODEL
+    )
+
+
+def relay_intervals(events: list[RecordEvent]) -> list[tuple[float, float | None]]:
+    """(on, off) of the torch relay pin in the host's monotonic seconds; off None if still on."""
+    intervals: list[tuple[float, float | None]] = []
+    on_at: float | None = None
+    for e in events:
+        if e.event != "torch":
+            continue
+        if e.fields[:1] == ("1",) and on_at is None:
+            on_at = e.mono_s
+        elif e.fields[:1] == ("0",) and on_at is not None:
+            intervals.append((on_at, e.mono_s))
+            on_at = None
+    if on_at is not None:
+        intervals.append((on_at, None))
+    return intervals
+
+
+def lit_windows(events: list[dict[str, Any]]) -> list[tuple[float, float]]:
+    """When the daemon's cut sequence was in a state that may light the torch: from the
+    event entering the first such state to the event leaving them (received times)."""
+    windows: list[tuple[float, float]] = []
+    since: float | None = None
+    for e in events:
+        if e.get("topic") != "event" or e.get("type") != "sequence":
+            continue
+        lit = e["state"] in LIT_STATES
+        if lit and since is None:
+            since = e["received_s"]
+        elif not lit and since is not None:
+            windows.append((since, e["received_s"]))
+            since = None
+    return windows
+
+
+async def test_the_masso_sample_cuts_on_the_emulated_mega_with_the_relay_only_in_its_cuts(
+    tmp_path: Path,
+) -> None:
+    """The MASSO sample program (T112 M6, G200, M3 with the board's probe, M667/M666, M5)
+    completes both cuts against the firmware: each relay-on interval lies inside a cut of
+    the daemon's sequence, none outside, and the relay is off at the end."""
+    async with Stack(emulated_stack(tmp_path)) as stack:
+        report = await stack.send(program_lines("masso_sample"))
+        await asyncio.sleep(0.5)  # the last sequence events
+        events = list(stack.events)
+        result = await stack.finish(report)
+    assert report.ok, report.error
+    assert report.cuts_started == 2
+    states = [e["state"] for e in events if e.get("type") == "sequence"]
+    assert states.count("cutting") == 2, states
+    assert "faulted" not in states, states
+    record = read_record(stack.board_record)
+    relay = relay_intervals(record)
+    windows = lit_windows(events)
+    assert len(relay) == 2, relay
+    assert len(windows) == 2, windows
+    for (on, off), (start, end) in zip(relay, windows, strict=True):
+        assert off is not None, "the relay is still on"
+        assert start - EVENT_SLACK_S <= on, (on, start)
+        assert off <= end + EVENT_SLACK_S, (off, end)
+    burning = [round(off - on, 2) for on, off in relay if off is not None]
+    assert all(b > 2.0 for b in burning), burning  # whole cuts, not a flicker
+    assert result.daemon_exit_code == 0
+    z_mm = [int(e.fields[0]) / 1000 for e in record if e.event == "z"]
+    print(json.dumps({"emulated_masso": {"relay_on_s": burning, "z_min_mm": min(z_mm)}}))
+    assert min(z_mm) > BOARD_MODEL["plate-mm"] - 2.0  # never drove into the plate
+
+
+async def test_a_daemon_killed_mid_cut_leaves_the_relay_on_no_longer_than_the_lease(
+    tmp_path: Path,
+) -> None:
+    """SIGKILL the daemon while it cuts: the firmware's lease turns the relay off within the
+    lease plus one sample period of the last host frame (measured from its delimiter
+    reaching the UART to the relay pin, in simulated time), and it stays off."""
+    lease_ms = BoardSettings().lease_ms
+    async with Stack(emulated_stack(tmp_path)) as stack:
+        sending = asyncio.create_task(stack.send(program_lines("masso_sample")))
+        for _ in range(800):
+            if any(
+                e.get("state") == "cutting" for e in stack.events if e.get("type") == "sequence"
+            ):
+                break
+            await asyncio.sleep(0.05)
+        else:
+            pytest.fail("the cut never started")
+        await asyncio.sleep(0.5)
+        assert stack.daemon is not None
+        stack.daemon.kill()
+        report = await asyncio.wait_for(sending, 30)
+        await asyncio.sleep(lease_ms / 1000 + 0.5)
+        assert stack.emulated_board is not None
+        after = stack.emulated_board.status()
+    assert not report.ok
+    record = read_record(stack.board_record)
+    relay = relay_intervals(record)
+    assert relay
+    assert relay[-1][1] is not None, "the relay is still on after the daemon died"
+    off_after_us = relay_off_after_last_host_byte_us(record)
+    assert off_after_us is not None
+    print(json.dumps({"relay_off_after_sigkill_ms": off_after_us / 1000, "lease_ms": lease_ms}))
+    # The frame is valid once decoded in the main loop, a little after its delimiter
+    # reached the UART: the conformance suite's tolerance covers that.
+    assert off_after_us <= lease_ms * 1000 + SAMPLE_PERIOD_US + LEASE_TOLERANCE_US
+    assert off_after_us >= lease_ms * 1000 - SAMPLE_PERIOD_US  # the lease, not something else
+    assert not after.torch
+
+
+# --- a garbage storm on the link, no daemon -----------------------------------------------
+
+
+class _Link:
+    """Frames over the board's pty: encode, write, decode what comes back."""
+
+    def __init__(self, path: Path) -> None:
+        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(self.fd)
+        self.decoder = fp.StreamDecoder()
+        self.received: list[fp.Message] = []
+        self.seq = 0
+        os.write(self.fd, b"\x00")
+
+    def close(self) -> None:
+        os.close(self.fd)
+
+    def pump(self, wait_s: float) -> None:
+        ready, _, _ = select.select([self.fd], [], [], wait_s)
+        if ready:
+            self.received.extend(self.decoder.feed(os.read(self.fd, 65536)))
+
+    def request(self, make: Any, attempts: int = 5, timeout_s: float = 0.1) -> fp.Message:
+        """As the daemon asks: the same frame again after ``timeout_s``, ``attempts`` times
+        (a board whose receive buffer is full drops what does not fit)."""
+        self.seq = self.seq % 255 + 1
+        msg = make(self.seq)
+        mark = len(self.received)
+        for _ in range(attempts):
+            os.write(self.fd, fp.encode(msg))
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline:
+                self.pump(0.01)
+                for reply in self.received[mark:]:
+                    if not isinstance(reply, fp.Samples | fp.Event | fp.Fault) and (
+                        getattr(reply, "seq", None) == msg.seq
+                    ):
+                        return reply
+        raise TimeoutError(f"no reply to {msg!r} in {attempts} attempts")
+
+
+@pytest.fixture
+def mega(tmp_path: Path) -> Iterator[EmulatedBoard]:
+    options = HarnessOptions(record=tmp_path / "record.csv", stderr=tmp_path / "host.log")
+    with EmulatedBoard(tmp_path / "board.pty", options) as board:
+        yield board
+
+
+def garbage(rng: random.Random, size: int) -> bytes:
+    """What a noisy cable delivers: random bytes, frames with a flipped bit, long runs with
+    no delimiter, lone delimiters and truncated frames."""
+    out = bytearray()
+    while len(out) < size:
+        kind = rng.randrange(5)
+        frame = bytearray(fp.encode(fp.Torch(rng.randrange(1, 256), True)))
+        if kind == 0:
+            out += rng.randbytes(rng.randrange(1, 64))
+        elif kind == 1:
+            frame[rng.randrange(len(frame) - 1)] ^= 1 << rng.randrange(8)
+            out += frame
+        elif kind == 2:
+            out += bytes(rng.randrange(1, 256) for _ in range(rng.randrange(259, 600)))
+        elif kind == 3:
+            out += b"\x00" * rng.randrange(1, 8)
+        else:
+            out += frame[: rng.randrange(1, len(frame) - 1)]
+    return bytes(out[:size])
+
+
+def test_a_storm_of_garbage_neither_resets_nor_wedges_the_board(mega: EmulatedBoard) -> None:
+    """64 kB of garbage at line rate into an open session: the board keeps its boot id (no
+    watchdog reset), keeps sending SAMPLES through the storm, counts the errors, never
+    switches the relay on (garbage contains bit-flipped TORCH-on frames) and answers at once
+    afterwards; the lease it lost during the storm re-arms with FAULT_RESET."""
+    link = _Link(mega.pty)
+    try:
+        hello = link.request(lambda s: fp.Hello(s, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 7))
+        assert isinstance(hello, fp.HelloInfo)
+        rng = random.Random(17)
+        storm = garbage(rng, 64 * 1024)
+        sent = 0
+        mark = len(link.received)
+        while sent < len(storm):  # as fast as the pty takes it
+            sent += os.write(link.fd, storm[sent : sent + 1024])
+            link.pump(0)
+        # The pty takes the bytes at once; the board's UART at its line rate (10 bits a byte).
+        drained_at = time.monotonic() + len(storm) * 10 / BAUD + 0.1
+        while time.monotonic() < drained_at:
+            link.pump(0.01)
+        during = [m for m in link.received[mark:] if isinstance(m, fp.Samples)]
+        os.write(link.fd, b"\x00")
+        again = link.request(lambda s: fp.Hello(s, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 8))
+        assert isinstance(again, fp.HelloInfo)
+        assert again.boot_id == hello.boot_id  # not reset (no watchdog, no crash)
+        status = link.request(lambda s: fp.Query(s, fp.QueryWhat.STATUS))
+        assert isinstance(status, fp.Status)
+        reset = link.request(lambda s: fp.FaultReset(s, 0xFFFF))
+        assert isinstance(reset, fp.Ack)
+        torch = link.request(lambda s: fp.Torch(s, False))
+        assert isinstance(torch, fp.Ack)
+    finally:
+        link.close()
+    assert status.rx_crc_errors + status.rx_framing_errors > 0
+    # SAMPLES kept coming while the receiver chewed on the garbage (1 kHz, batches of 5).
+    seqs = [m.stream_seq for m in during]
+    assert len(during) > 20, len(during)
+    assert mega.options.record is not None
+    record = read_record(mega.options.record)
+    assert [e for e in record if e.event == "torch" and e.fields[:1] == ("1",)] == []
+    print(json.dumps({"storm_bytes": len(storm), "samples_during": len(seqs),
+                      "rx_crc_errors": status.rx_crc_errors,
+                      "rx_framing_errors": status.rx_framing_errors}))  # fmt: skip
