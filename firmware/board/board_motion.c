@@ -8,7 +8,7 @@
 #include "board_internal.h"
 
 static int32_t brake_full_um; /* distance beyond which braking never limits the speed */
-static int32_t creep_um_s;    /* the speed at which one step from the end still stops */
+static int32_t creep_um_s;    /* the slowest approach: Z stops from it within one tick */
 
 static uint32_t isqrt32(uint32_t x)
 {
@@ -58,6 +58,7 @@ void board_z_update_dv(void)
     if (B.z_dv_um_s < 1) {
         B.z_dv_um_s = 1;
     }
+    creep_um_s = B.z_dv_um_s;
 }
 
 void board_z_init(void)
@@ -65,7 +66,6 @@ void board_z_init(void)
     const board_config_t *c = B.cfg;
     uint32_t vmax = (uint32_t)c->z_max_speed_um_s;
     brake_full_um = (int32_t)(vmax * vmax / (2u * (uint32_t)c->z_accel_um_s2)) + 1;
-    creep_um_s = brake_um_s((int32_t)(1000u / c->z_steps_per_mm) + 1);
     board_z_update_dv();
     hal_z_drive(0, steps_of(c->z_min_um), steps_of(c->z_max_um));
 }
@@ -188,7 +188,8 @@ void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms)
 }
 
 /* Speed towards an end d_um away: as fast as the feed allows while still able to stop
- * there (looking one tick ahead), never so slow that the last steps stall. */
+ * there (looking one tick and one step ahead: the position is known to a step), never so
+ * slow that the last steps stall. */
 static int32_t approach_um_s(int32_t d_um, int32_t feed)
 {
     int32_t ahead = (B.z_v_um_s < 0 ? -B.z_v_um_s : B.z_v_um_s) * (int32_t)B.period_us / 1000000L;
@@ -196,7 +197,7 @@ static int32_t approach_um_s(int32_t d_um, int32_t feed)
     if (d_um <= 0) {
         return 0;
     }
-    v = brake_um_s(d_um - ahead);
+    v = brake_um_s(d_um - ahead - (int32_t)(1000u / B.cfg->z_steps_per_mm) - 1);
     if (v < creep_um_s) {
         v = creep_um_s;
     }
@@ -217,7 +218,7 @@ void board_z_tick(void)
     case Z_MOVE: {
         int32_t d = B.z_target_um - z;
         if (hal_z_steps() == steps_of(B.z_target_um)) {
-            v = 0; /* at the target: the last steps came at creep speed */
+            v = 0; /* at the target, from at most creep speed: within one tick's change */
             B.z_mode = Z_IDLE;
             motion_done(DTHC_MOTION_REACHED, z);
         } else if (d > 0) {

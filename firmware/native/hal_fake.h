@@ -1,0 +1,36 @@
+/* hal_fake.h - a fake hardware layer for the native unit tests of the board logic. */
+#ifndef DTHC_HAL_FAKE_H
+#define DTHC_HAL_FAKE_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+typedef struct {
+    uint64_t now_us;       /* the clock hal_time_us reads */
+    uint32_t next_tick_us; /* the scheduled time of the next tick */
+    uint16_t period_us;
+    int tick_locked;
+    uint16_t inputs;        /* what hal_inputs returns (protocol order, active = 1) */
+    uint16_t arc_raw;       /* what hal_arc_raw returns */
+    bool torch;
+    bool ohmic;
+    int32_t steps;          /* the step generator's position */
+    int32_t rate;           /* its commanded rate, steps/s */
+    int32_t lo, hi;
+    int64_t phase_us;       /* fractional steps, in step-microseconds */
+    uint8_t rx[4096];
+    unsigned rx_len, rx_pos;
+    uint8_t tx[65536];
+    unsigned tx_len;
+    unsigned tx_cap;        /* ring space the fake pretends to have */
+} fake_hal_t;
+
+extern fake_hal_t F;
+
+void fake_reset(void);
+/* Queue host bytes for hal_uart_getc. */
+void fake_rx(const uint8_t *data, unsigned n);
+/* Advance the clock by us: step the generator and run every tick that falls due. */
+void fake_run_us(uint32_t us);
+
+#endif /* DTHC_HAL_FAKE_H */

@@ -1,0 +1,861 @@
+/*
+ * test_board.c - native unit tests of the board logic (firmware/board/) over the fake HAL.
+ *
+ *   test_board            run every test
+ *   test_board NAME...    run the named tests
+ *   test_board --list     print the test names
+ * Prints "ok NAME" or "FAIL NAME: why" per test; exits 1 if any failed.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../firmware_protocol/c/dthc_protocol.h"
+#include "../board/board.h"
+#include "hal_fake.h"
+
+/* --- plumbing -------------------------------------------------------------------------- */
+
+static const board_config_t CONFIG = {
+    "DTHC-TEST-0001",
+    DTHC_CAP_OHMIC | DTHC_CAP_FLOAT | DTHC_CAP_BREAKAWAY | DTHC_CAP_ESTOP | DTHC_CAP_FILTERS,
+    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON,
+};
+
+typedef struct {
+    uint8_t type;
+    uint8_t seq;
+    uint8_t len;
+    uint8_t p[DTHC_MAX_PAYLOAD];
+} frame_t;
+
+#define MAX_FRAMES 4096
+static frame_t out[MAX_FRAMES];
+static unsigned n_out;
+static unsigned parsed_to;
+static dthc_rx_t host_rx;
+static char why[256];
+static uint8_t next_seq = 1;
+
+#define CHECK(cond, ...)                                                                     \
+    do {                                                                                     \
+        if (!(cond)) {                                                                       \
+            snprintf(why, sizeof why, __VA_ARGS__);                                          \
+            return 1;                                                                        \
+        }                                                                                    \
+    } while (0)
+
+/* Parse what the board sent since the last call into out[]. */
+static void parse(void)
+{
+    while (parsed_to < F.tx_len) {
+        dthc_frame_t f;
+        if (dthc_rx_feed(&host_rx, F.tx[parsed_to++], &f) == 1 && n_out < MAX_FRAMES) {
+            frame_t *o = &out[n_out++];
+            o->type = f.type;
+            o->seq = f.seq;
+            o->len = f.len;
+            memcpy(o->p, f.payload, f.len);
+        }
+    }
+}
+
+static void setup(void)
+{
+    fake_reset();
+    board_init(&CONFIG, 0xC0FFEE01u);
+    dthc_rx_init(&host_rx);
+    n_out = parsed_to = 0;
+    next_seq = 1;
+}
+
+/* Send one frame to the board and let the main loop handle it. */
+static void send_raw(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len)
+{
+    uint8_t wire[DTHC_MAX_WIRE_FRAME];
+    size_t n = dthc_encode_frame(type, seq, payload, len, wire, sizeof wire);
+    fake_rx(wire, (unsigned)n);
+    while (board_poll()) {
+    }
+    parse();
+}
+
+static uint8_t send(uint8_t type, const uint8_t *payload, uint8_t len)
+{
+    uint8_t seq = next_seq;
+    next_seq = (uint8_t)(next_seq == 255 ? 1 : next_seq + 1);
+    send_raw(type, seq, payload, len);
+    return seq;
+}
+
+static void run_ms(uint32_t ms)
+{
+    fake_run_us(ms * 1000u);
+    parse();
+}
+
+/* The last frame of a type (with seq, unless seq < 0) sent since index `since`. */
+static const frame_t *last(uint8_t type, int seq, unsigned since)
+{
+    const frame_t *found = NULL;
+    unsigned i;
+    for (i = since; i < n_out; i++) {
+        if (out[i].type == type && (seq < 0 || out[i].seq == seq)) {
+            found = &out[i];
+        }
+    }
+    return found;
+}
+
+static unsigned count(uint8_t type, int seq, unsigned since)
+{
+    unsigned i, n = 0;
+    for (i = since; i < n_out; i++) {
+        n += out[i].type == type && (seq < 0 || out[i].seq == seq);
+    }
+    return n;
+}
+
+static int is_ack(uint8_t seq, unsigned since)
+{
+    return last(DTHC_MSG_ACK, seq, since) != NULL && !last(DTHC_MSG_NAK, seq, since);
+}
+
+static int nak_code(uint8_t seq, unsigned since, uint8_t *detail)
+{
+    const frame_t *f = last(DTHC_MSG_NAK, seq, since);
+    if (!f) {
+        return -1;
+    }
+    if (detail) {
+        *detail = f->p[5];
+    }
+    return f->p[4];
+}
+
+static void hello(void)
+{
+    uint8_t p[6] = {DTHC_PROTOCOL_MAJOR, DTHC_PROTOCOL_MINOR, 1, 2, 3, 4};
+    send(DTHC_MSG_HELLO, p, 6);
+}
+
+static uint8_t cmd_u8(uint8_t type, uint8_t v)
+{
+    return send(type, &v, 1);
+}
+
+static uint8_t cmd_u16(uint8_t type, uint16_t v)
+{
+    uint8_t p[2];
+    dthc_put_u16(p, v);
+    return send(type, p, 2);
+}
+
+static uint8_t z_move(int32_t target_um, uint32_t feed_um_s)
+{
+    uint8_t p[8];
+    dthc_put_i32(p, target_um);
+    dthc_put_u32(p + 4, feed_um_s);
+    return send(DTHC_MSG_Z_MOVE, p, 8);
+}
+
+static uint8_t z_probe(uint32_t feed, uint32_t travel, uint16_t sensors)
+{
+    uint8_t p[10];
+    dthc_put_u32(p, feed);
+    dthc_put_u32(p + 4, travel);
+    dthc_put_u16(p + 8, sensors);
+    return send(DTHC_MSG_Z_PROBE, p, 10);
+}
+
+static void z_velocity(uint16_t stream_seq, int32_t v, uint16_t expiry_ms)
+{
+    uint8_t p[8];
+    dthc_put_u16(p, stream_seq);
+    dthc_put_i32(p + 2, v);
+    dthc_put_u16(p + 6, expiry_ms);
+    send_raw(DTHC_MSG_Z_VELOCITY, 0, p, 8);
+}
+
+static uint8_t configure(uint16_t rate, uint8_t batch, uint8_t kind, uint16_t param,
+                         uint16_t arc_lost, int32_t offset, float scale)
+{
+    uint8_t p[16];
+    uint32_t bits;
+    memcpy(&bits, &scale, 4);
+    dthc_put_u16(p, rate);
+    p[2] = batch;
+    p[3] = kind;
+    dthc_put_u16(p + 4, param);
+    dthc_put_u16(p + 6, arc_lost);
+    dthc_put_i32(p + 8, offset);
+    dthc_put_u32(p + 12, bits);
+    return send(DTHC_MSG_CONFIGURE, p, 16);
+}
+
+/* A fresh STATUS. */
+static const frame_t *status(void)
+{
+    uint8_t seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_STATUS);
+    return last(DTHC_MSG_STATUS, seq, 0);
+}
+
+static int32_t z_um(void)
+{
+    return dthc_get_i32(status()->p + 23);
+}
+
+static uint16_t faults(void)
+{
+    return dthc_get_u16(status()->p + 8);
+}
+
+static uint8_t status_bits(void)
+{
+    return status()->p[12];
+}
+
+#define IN(bit) (1u << DTHC_INPUT_##bit)
+#define FAULT(bit) (1u << DTHC_FAULT_##bit)
+
+/* --- tests ------------------------------------------------------------------------------- */
+
+/* Host silent: torch off, Z decelerating and LEASE_EXPIRED latched in the first tick past
+ * the lease. */
+static int test_lease_expiry_within_one_tick(void)
+{
+    unsigned mark;
+    const frame_t *f;
+    uint32_t t_last;
+    hello();
+    cmd_u8(DTHC_MSG_TORCH, 1);
+    z_move(80000, 20000);
+    t_last = (uint32_t)F.now_us; /* the last host frame */
+    run_ms(50);
+    CHECK(F.torch && F.rate > 0, "torch on and Z moving before the silence");
+    mark = n_out;
+    run_ms(200);
+    CHECK(F.torch, "torch must still be on at exactly the lease");
+    run_ms(1);
+    f = last(DTHC_MSG_FAULT, -1, mark);
+    CHECK(!F.torch, "torch still on one tick past the lease");
+    CHECK(f && f->p[8] == DTHC_FAULT_LEASE_EXPIRED, "no FAULT LEASE_EXPIRED");
+    CHECK(dthc_get_u32(f->p + 4) - t_last <= 251000u, "fault at %u us",
+          (unsigned)(dthc_get_u32(f->p + 4) - t_last));
+    CHECK(last(DTHC_MSG_MOTION_DONE, -1, mark)
+              && last(DTHC_MSG_MOTION_DONE, -1, mark)->p[0] == DTHC_MOTION_FAULT,
+          "the move must end with MOTION_DONE FAULT");
+    run_ms(100);
+    CHECK(F.rate == 0, "Z still stepping 100 ms after expiry (rate %d)", (int)F.rate);
+    return 0;
+}
+
+/* Frames after expiry renew nothing; only FAULT_RESET re-arms. */
+static int test_frames_after_expiry_do_not_revive(void)
+{
+    uint8_t seq;
+    unsigned mark;
+    hello();
+    cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+    run_ms(300);
+    CHECK(faults() & FAULT(LEASE_EXPIRED), "lease not expired");
+    CHECK(!F.ohmic, "ohmic sensing still on after expiry");
+    send(DTHC_MSG_HEARTBEAT, NULL, 0);
+    run_ms(10);
+    CHECK(faults() & FAULT(LEASE_EXPIRED), "a heartbeat cleared the lease fault");
+    mark = n_out;
+    seq = cmd_u8(DTHC_MSG_TORCH, 1);
+    CHECK(nak_code(seq, mark, NULL) == DTHC_NAK_FAULT_LATCHED, "TORCH on accepted while latched");
+    CHECK(!F.torch, "torch on while latched");
+    seq = cmd_u16(DTHC_MSG_FAULT_RESET, FAULT(LEASE_EXPIRED));
+    CHECK(is_ack(seq, mark), "FAULT_RESET not acknowledged");
+    CHECK(!(faults() & FAULT(LEASE_EXPIRED)), "FAULT_RESET did not clear the lease fault");
+    seq = cmd_u8(DTHC_MSG_TORCH, 1);
+    CHECK(is_ack(seq, mark) && F.torch, "torch refused after FAULT_RESET");
+    run_ms(200);
+    CHECK(F.torch, "re-armed lease expired early");
+    run_ms(100);
+    CHECK(!F.torch && (faults() & FAULT(LEASE_EXPIRED)), "re-armed lease did not expire again");
+    return 0;
+}
+
+/* While latched, FAULT is re-sent every 250 ms with the counter that latched it. */
+static int test_fault_rereported_every_250ms(void)
+{
+    unsigned mark, i, n = 0;
+    uint32_t counter = 0, t_prev = 0;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    F.inputs = IN(ESTOP);
+    run_ms(2);
+    mark = n_out;
+    run_ms(1000);
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_FAULT) {
+            uint32_t t = dthc_get_u32(out[i].p + 4);
+            if (n) {
+                CHECK(t - t_prev == 250000u, "re-report after %u us", (unsigned)(t - t_prev));
+                CHECK(dthc_get_u32(out[i].p) == counter, "re-report changed the counter");
+            }
+            counter = dthc_get_u32(out[i].p);
+            t_prev = t;
+            n++;
+        }
+    }
+    CHECK(n >= 3, "%u re-reports in 1 s", n);
+    return 0;
+}
+
+/* A retransmitted seq is answered from memory, not executed again; NAKs too. */
+static int test_duplicate_replayed_not_reexecuted(void)
+{
+    uint8_t p = 1, lease[2];
+    uint8_t seq;
+    unsigned mark;
+    const frame_t *s;
+    hello();
+    seq = cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+    cmd_u8(DTHC_MSG_OHMIC_SENSE, 0);
+    mark = n_out;
+    send_raw(DTHC_MSG_OHMIC_SENSE, seq, &p, 1);
+    CHECK(is_ack(seq, mark), "duplicate not acknowledged again");
+    CHECK(!F.ohmic, "duplicate executed again");
+    dthc_put_u16(lease, 5);
+    seq = send(DTHC_MSG_SET_LEASE, lease, 2);
+    send_raw(DTHC_MSG_SET_LEASE, seq, lease, 2);
+    CHECK(count(DTHC_MSG_NAK, seq, mark) == 2, "refused command's NAK not repeated");
+    s = status();
+    CHECK(dthc_get_u16(s->p + 33) == 2, "rx_duplicates %u", dthc_get_u16(s->p + 33));
+    /* HELLO clears the memory: the same seq executes again. */
+    hello();
+    mark = n_out;
+    send_raw(DTHC_MSG_OHMIC_SENSE, 1, &p, 1);
+    CHECK(F.ohmic, "after HELLO an old seq must execute");
+    return 0;
+}
+
+/* Unknown type and bad length: NAK with the rejected frame's own seq. */
+static int test_nak_with_rejected_frames_seq(void)
+{
+    uint8_t two[2] = {0, 0};
+    unsigned mark;
+    hello();
+    mark = n_out;
+    send_raw(0x7E, 77, NULL, 0);
+    CHECK(nak_code(77, mark, NULL) == DTHC_NAK_UNKNOWN_TYPE, "unknown type: no NAK with seq 77");
+    send_raw(DTHC_MSG_TORCH, 78, two, 2);
+    CHECK(nak_code(78, mark, NULL) == DTHC_NAK_BAD_LENGTH, "bad length: no NAK with seq 78");
+    send_raw(0x7E, 0, NULL, 0);
+    CHECK(count(DTHC_MSG_NAK, 0, mark) == 0, "seq 0 must not be answered");
+    return 0;
+}
+
+/* Before HELLO: commands refused with NO_SESSION; queries answered. */
+static int test_no_session_refusals(void)
+{
+    uint8_t seq;
+    unsigned mark = n_out;
+    seq = cmd_u8(DTHC_MSG_TORCH, 1);
+    CHECK(nak_code(seq, mark, NULL) == DTHC_NAK_NO_SESSION, "TORCH before HELLO not refused");
+    CHECK(!F.torch, "torch on without a session");
+    seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HELLO_INFO);
+    CHECK(last(DTHC_MSG_HELLO_INFO, seq, mark), "QUERY(HELLO_INFO) before HELLO unanswered");
+    CHECK(!(status_bits() & DTHC_STATUS_SESSION), "session bit before HELLO");
+    return 0;
+}
+
+/* HELLO_INFO says what the build has. */
+static int test_hello_info_fields(void)
+{
+    const frame_t *h;
+    uint8_t seq;
+    hello();
+    seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HELLO_INFO);
+    h = last(DTHC_MSG_HELLO_INFO, seq, 0);
+    CHECK(h && h->len == 45, "no HELLO_INFO");
+    CHECK(h->p[2] == 0 && h->p[3] == 1 && h->p[4] == 0, "fw version");
+    CHECK(memcmp(h->p + 10, "DTHC-TEST-0001\0\0", 16) == 0, "serial");
+    CHECK(dthc_get_u32(h->p + 29) == CONFIG.capabilities, "capabilities");
+    CHECK(!(dthc_get_u32(h->p + 29) & (DTHC_CAP_XY_SPEED | DTHC_CAP_CURRENT_OUT)), "caps");
+    CHECK(dthc_get_u16(h->p + 43) == 250, "lease");
+    return 0;
+}
+
+/* The probe stops in the tick that reads the contact, reports contact and rest positions. */
+static int test_probe_stops_on_contact_in_tick(void)
+{
+    uint8_t seq;
+    unsigned mark;
+    const frame_t *r;
+    int32_t contact;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    seq = z_probe(5000, 20000, IN(OHMIC) | IN(FLOAT));
+    CHECK(is_ack(seq, 0), "probe not acknowledged");
+    run_ms(500);
+    CHECK(F.rate < 0, "probe not moving down");
+    mark = n_out;
+    F.inputs = IN(FLOAT);
+    fake_run_us(F.next_tick_us - (uint32_t)F.now_us); /* exactly one tick */
+    parse();
+    CHECK(F.rate > -5000 * 200 / 1000, "no deceleration in the contact tick (rate %d)",
+          (int)F.rate);
+    run_ms(50);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, mark);
+    CHECK(r, "no PROBE_RESULT");
+    contact = dthc_get_i32(r->p + 3);
+    CHECK(r->p[0] == DTHC_PROBE_CONTACT, "result %u", r->p[0]);
+    CHECK(dthc_get_u16(r->p + 1) == IN(FLOAT), "sensor");
+    CHECK(contact <= 60000 - 2400 && contact >= 60000 - 2600, "contact at %d", (int)contact);
+    CHECK(dthc_get_i32(r->p + 7) <= contact && dthc_get_i32(r->p + 7) >= contact - 50,
+          "stop %d vs contact %d", (int)dthc_get_i32(r->p + 7), (int)contact);
+    CHECK(F.rate == 0, "still moving after the result");
+    return 0;
+}
+
+/* No contact within max travel: NO_CONTACT, resting at the travel's end. */
+static int test_probe_no_contact_and_limit(void)
+{
+    uint8_t seq;
+    const frame_t *r;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    seq = z_probe(20000, 3000, IN(OHMIC));
+    run_ms(600);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_NO_CONTACT, "no NO_CONTACT");
+    CHECK(dthc_get_i32(r->p + 7) == 57000, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    seq = z_probe(60000, 90000, IN(OHMIC));
+    run_ms(2000);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_LIMIT, "no LIMIT result");
+    CHECK(dthc_get_i32(r->p + 7) == 0, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    return 0;
+}
+
+/* A stream frame not newer than the last applied is ignored; expiry stops Z. */
+static int test_z_velocity_stale_ignored_and_expiry(void)
+{
+    int32_t z0, z1, z2;
+    hello();
+    z0 = z_um();
+    z_velocity(10, 3000, 40);
+    run_ms(20);
+    z_velocity(11, 3000, 40);
+    run_ms(30);
+    CHECK(F.rate > 0, "velocity not applied");
+    CHECK(dthc_get_u16(status()->p + 21) == 11, "zvel_seq not echoed");
+    run_ms(40); /* 40 ms after seq 11: expired, decelerating */
+    run_ms(20);
+    CHECK(F.rate == 0 && !(status_bits() & DTHC_STATUS_Z_BUSY), "Z not stopped after expiry");
+    z1 = z_um();
+    CHECK(z1 > z0, "Z did not move up");
+    z_velocity(10, 3000, 40); /* older */
+    z_velocity(11, 3000, 40); /* same */
+    run_ms(30);
+    z2 = z_um();
+    CHECK(z2 == z1 && F.rate == 0, "a stale Z_VELOCITY was applied");
+    CHECK(dthc_get_u16(status()->p + 21) == 11, "stale frame changed zvel_seq");
+    z_velocity((uint16_t)(11 + 40000), 3000, 40); /* "newer" by > 32767: older */
+    run_ms(10);
+    CHECK(F.rate == 0, "a wrapped-older frame was applied");
+    z_velocity(12, -3000, 40);
+    run_ms(10);
+    CHECK(F.rate < 0, "a newer frame was not applied");
+    return 0;
+}
+
+/* A velocity stream into a soft limit stops at it and latches Z_LIMIT. */
+static int test_soft_limit_latches_z_limit(void)
+{
+    uint16_t s;
+    unsigned i;
+    const frame_t *f;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    for (i = 0; i < 120; i++) {
+        z_velocity((uint16_t)(100 + i), 60000, 50);
+        run_ms(10);
+    }
+    f = last(DTHC_MSG_FAULT, -1, 0);
+    CHECK(f && f->p[8] == DTHC_FAULT_Z_LIMIT && f->p[9] == 1, "no Z_LIMIT max fault");
+    CHECK(z_um() == 100000, "Z at %d, not at the limit", (int)z_um());
+    s = faults();
+    CHECK(s & FAULT(Z_LIMIT), "Z_LIMIT not latched");
+    return 0;
+}
+
+/* Move targets outside the soft limits are refused; while latched only upward moves. */
+static int test_move_limits_and_upward_only(void)
+{
+    uint8_t seq, d;
+    unsigned mark = 0;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    seq = z_move(100001, 10000);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 0, "target above max");
+    seq = z_move(-1, 10000);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 0, "target below min");
+    seq = z_move(50000, 0);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 1, "feed 0");
+    F.inputs = IN(BREAKAWAY);
+    run_ms(2);
+    F.inputs = 0;
+    seq = z_move(50000, 10000);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_FAULT_LATCHED && d == DTHC_FAULT_BREAKAWAY,
+          "downward move while latched");
+    seq = z_move(70000, 30000);
+    CHECK(is_ack(seq, mark), "upward move refused while latched");
+    run_ms(1000);
+    CHECK(last(DTHC_MSG_MOTION_DONE, seq, 0)
+              && last(DTHC_MSG_MOTION_DONE, seq, 0)->p[0] == DTHC_MOTION_REACHED,
+          "upward move not reached");
+    return 0;
+}
+
+/* A move follows a trapezoid: accel limit respected, reaches the target exactly. */
+static int test_move_trapezoid(void)
+{
+    uint8_t seq;
+    int32_t prev = 0, max_rate = 0;
+    unsigned i;
+    const frame_t *done;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    seq = z_move(20000, 60000);
+    for (i = 0; i < 1500; i++) {
+        int32_t r = F.rate;
+        int32_t dr = r - prev;
+        CHECK(dr <= 131 && dr >= -131, "rate step %d steps/s in one tick (tick %u, rate %d, z %d)", (int)dr, i, (int)r, (int)F.steps);
+        if (-r > max_rate) {
+            max_rate = -r;
+        }
+        prev = r;
+        run_ms(1);
+    }
+    done = last(DTHC_MSG_MOTION_DONE, seq, 0);
+    CHECK(done && done->p[0] == DTHC_MOTION_REACHED, "no MOTION_DONE REACHED");
+    CHECK(dthc_get_i32(done->p + 1) == 20000, "done at %d", (int)dthc_get_i32(done->p + 1));
+    CHECK(max_rate == 12000, "top speed %d steps/s", (int)max_rate);
+    CHECK(z_um() == 20000, "rest at %d", (int)z_um());
+    return 0;
+}
+
+/* Z_STOP and superseding report STOPPED and SUPERSEDED; QUERY(MOTION_DONE) re-sends. */
+static int test_stop_supersede_query(void)
+{
+    uint8_t a, b, stop, q;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    a = z_move(90000, 20000);
+    run_ms(100);
+    b = z_move(10000, 20000);
+    CHECK(last(DTHC_MSG_MOTION_DONE, a, 0)
+              && last(DTHC_MSG_MOTION_DONE, a, 0)->p[0] == DTHC_MOTION_SUPERSEDED,
+          "no SUPERSEDED");
+    run_ms(100);
+    stop = send(DTHC_MSG_Z_STOP, NULL, 0);
+    CHECK(is_ack(stop, 0), "Z_STOP not acknowledged");
+    CHECK(last(DTHC_MSG_MOTION_DONE, b, 0)
+              && last(DTHC_MSG_MOTION_DONE, b, 0)->p[0] == DTHC_MOTION_STOPPED,
+          "no STOPPED");
+    run_ms(100);
+    CHECK(F.rate == 0, "not stopped");
+    q = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_MOTION_DONE);
+    CHECK(last(DTHC_MSG_MOTION_DONE, q, 0)
+              && last(DTHC_MSG_MOTION_DONE, q, 0)->p[0] == DTHC_MOTION_STOPPED,
+          "QUERY(MOTION_DONE) did not re-send with its seq");
+    return 0;
+}
+
+/* E-stop and breakaway latch, torch off; reset refused while active, then cleared. */
+static int test_estop_breakaway_latch(void)
+{
+    uint8_t seq, d;
+    unsigned mark;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    cmd_u8(DTHC_MSG_TORCH, 1);
+    F.inputs = IN(ESTOP);
+    run_ms(1);
+    CHECK(!F.torch, "torch on after E-stop");
+    CHECK(faults() & FAULT(ESTOP), "ESTOP not latched");
+    mark = n_out;
+    seq = cmd_u16(DTHC_MSG_FAULT_RESET, FAULT(ESTOP));
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_FAULT_ACTIVE && d == DTHC_FAULT_ESTOP,
+          "reset while E-stop active not refused");
+    F.inputs = IN(BREAKAWAY);
+    run_ms(1);
+    CHECK(faults() == (FAULT(ESTOP) | FAULT(BREAKAWAY)), "breakaway not latched");
+    seq = cmd_u16(DTHC_MSG_FAULT_RESET, 0xFFFF);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_FAULT_ACTIVE && d == DTHC_FAULT_BREAKAWAY,
+          "reset while breakaway active");
+    CHECK(faults() == (FAULT(ESTOP) | FAULT(BREAKAWAY)), "a refused reset cleared something");
+    F.inputs = 0;
+    run_ms(1);
+    seq = cmd_u16(DTHC_MSG_FAULT_RESET, 0xFFFF);
+    CHECK(is_ack(seq, mark) && faults() == 0, "reset after release failed");
+    return 0;
+}
+
+/* Every edge an EVENT; EVENT and FAULT share the counter. */
+static int test_events_and_shared_counter(void)
+{
+    unsigned mark, i;
+    uint32_t expect = 0;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    mark = n_out;
+    F.inputs = IN(ARC_OK) | IN(FLOAT);
+    run_ms(1);
+    F.inputs = IN(FLOAT);
+    run_ms(1);
+    F.inputs = IN(FLOAT) | IN(BREAKAWAY);
+    run_ms(1);
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_EVENT || out[i].type == DTHC_MSG_FAULT) {
+            uint32_t c = dthc_get_u32(out[i].p);
+            CHECK(c == ++expect, "counter %u, expected %u", (unsigned)c, (unsigned)expect);
+        }
+    }
+    CHECK(expect == 5, "%u events+faults, expected 4 edges and 1 fault", (unsigned)expect);
+    CHECK(count(DTHC_MSG_EVENT, -1, mark) == 4, "edges");
+    return 0;
+}
+
+/* Ohmic contact is reported only while ohmic sensing is on. */
+static int test_ohmic_only_while_sensing(void)
+{
+    hello();
+    F.inputs = IN(OHMIC);
+    run_ms(2);
+    CHECK(!(dthc_get_u16(status()->p + 10) & IN(OHMIC)), "ohmic contact seen with sensing off");
+    cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+    run_ms(2);
+    CHECK(dthc_get_u16(status()->p + 10) & IN(OHMIC), "ohmic contact not seen with sensing on");
+    return 0;
+}
+
+/* CONFIGURE out of range: NAK with the field's index, nothing applied. */
+static int test_configure_out_of_range(void)
+{
+    uint8_t seq, d;
+    unsigned mark = 0;
+    const frame_t *h;
+    hello();
+    seq = configure(50, 5, 0, 0, 0, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 0, "rate 50: field %u", d);
+    seq = configure(1000, 0, 0, 0, 0, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 1, "batch 0");
+    seq = configure(1000, 5, 4, 0, 0, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 2, "filter kind 4");
+    seq = configure(1000, 5, 1, 33, 0, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 3, "moving average 33");
+    seq = configure(1000, 5, 2, 501, 0, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 3, "low-pass 501 Hz");
+    seq = configure(1000, 5, 0, 0, 1001, 0, 0.01f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 4, "arc_lost 1001");
+    seq = configure(500, 10, 0, 0, 0, 0, 0.0f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 6, "scale 0");
+    seq = configure(500, 10, 0, 0, 0, 0, -1.0f);
+    CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 6, "scale -1");
+    seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HELLO_INFO);
+    h = last(DTHC_MSG_HELLO_INFO, seq, 0);
+    CHECK(dthc_get_u16(h->p + 26) == 1000 && h->p[28] == 5, "a refused CONFIGURE applied");
+    CHECK(F.period_us == 1000, "tick period changed");
+    seq = configure(500, 10, 0, 0, 0, 0, 0.01f);
+    CHECK(is_ack(seq, mark) && F.period_us == 2000, "valid CONFIGURE not applied");
+    return 0;
+}
+
+/* Calibration and filters on what SAMPLES carry. */
+static uint16_t last_sample(void)
+{
+    const frame_t *s = last(DTHC_MSG_SAMPLES, -1, 0);
+    return s ? dthc_get_u16(s->p + s->len - 2) : 0xFFFF;
+}
+
+static int test_calibration_and_filters(void)
+{
+    const frame_t *s;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    /* volts = (raw - 1000) * 0.02: raw 13500 -> 250.00 V */
+    configure(1000, 1, DTHC_FILTER_NONE, 0, 0, 1000, 0.02f);
+    F.arc_raw = 13500;
+    run_ms(1);
+    CHECK(last_sample() == 25000, "calibrated %u, expected 25000", last_sample());
+    s = last(DTHC_MSG_SAMPLES, -1, 0);
+    CHECK(s->len == 21 && dthc_get_u16(s->p + 6) == 1000 && dthc_get_u16(s->p + 16) == 0xFFFF,
+          "SAMPLES header");
+    /* moving average over 4 */
+    configure(1000, 1, DTHC_FILTER_MOVING_AVERAGE, 4, 0, 0, 0.01f);
+    F.arc_raw = 10000;
+    run_ms(4);
+    F.arc_raw = 12000;
+    run_ms(2);
+    CHECK(last_sample() == 11000, "moving average %u, expected 11000", last_sample());
+    run_ms(2);
+    CHECK(last_sample() == 12000, "moving average settled at %u", last_sample());
+    /* median of three rejects a one-sample spike */
+    configure(1000, 1, DTHC_FILTER_MEDIAN3, 0, 0, 0, 0.01f);
+    F.arc_raw = 12000;
+    run_ms(3);
+    F.arc_raw = 40000;
+    run_ms(1);
+    CHECK(last_sample() == 12000, "median3 passed a spike: %u", last_sample());
+    F.arc_raw = 12000;
+    run_ms(1);
+    CHECK(last_sample() == 12000, "median3 %u", last_sample());
+    /* low-pass at 10 Hz, 1 kHz: a step reaches 1 - 1/e after about RC = 15.9 ms */
+    configure(1000, 1, DTHC_FILTER_LOW_PASS, 10, 0, 0, 0.01f);
+    F.arc_raw = 0;
+    run_ms(1);
+    F.arc_raw = 10000;
+    run_ms(16);
+    CHECK(last_sample() > 6000 && last_sample() < 6600, "low-pass after RC: %u", last_sample());
+    run_ms(200);
+    CHECK(last_sample() > 9990, "low-pass settled at %u", last_sample());
+    /* clamped to 0..655.35 V */
+    configure(1000, 1, DTHC_FILTER_NONE, 0, 0, 20000, 0.01f);
+    F.arc_raw = 100;
+    run_ms(1);
+    CHECK(last_sample() == 0, "negative volts not clamped to 0: %u", last_sample());
+    return 0;
+}
+
+/* Batches: N samples, t0 steps by N x period, stream_seq counts. */
+static int test_batches(void)
+{
+    unsigned mark, i, n = 0;
+    uint32_t t_prev = 0;
+    uint16_t seq_prev = 0;
+    hello();
+    mark = n_out;
+    run_ms(100);
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_SAMPLES) {
+            uint32_t t0 = dthc_get_u32(out[i].p + 2);
+            uint16_t sseq = dthc_get_u16(out[i].p);
+            CHECK(out[i].len == 19 + 2 * 5, "batch of %u bytes", out[i].len);
+            if (n) {
+                CHECK(t0 - t_prev == 5000, "t0 step %u", (unsigned)(t0 - t_prev));
+                CHECK((uint16_t)(sseq - seq_prev) == 1, "stream_seq gap");
+            }
+            t_prev = t0;
+            seq_prev = sseq;
+            n++;
+        }
+    }
+    CHECK(n == 20, "%u batches in 100 ms", n);
+    return 0;
+}
+
+/* SET_CURRENT is refused (no CURRENT_OUT); SET_LEASE range. */
+static int test_unsupported_and_lease_range(void)
+{
+    uint8_t seq, d;
+    hello();
+    seq = cmd_u16(DTHC_MSG_SET_CURRENT, 450);
+    CHECK(nak_code(seq, 0, &d) == DTHC_NAK_UNSUPPORTED && d == 5, "SET_CURRENT");
+    seq = cmd_u16(DTHC_MSG_SET_LEASE, 19);
+    CHECK(nak_code(seq, 0, &d) == DTHC_NAK_OUT_OF_RANGE, "lease 19");
+    seq = cmd_u16(DTHC_MSG_SET_LEASE, 2001);
+    CHECK(nak_code(seq, 0, &d) == DTHC_NAK_OUT_OF_RANGE, "lease 2001");
+    return 0;
+}
+
+/* Board-side ARC_LOST: torch on, arc OK seen, then gone for arc_lost_ms. */
+static int test_arc_lost(void)
+{
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    configure(1000, 5, 0, 0, 50, 0, 0.01f);
+    cmd_u8(DTHC_MSG_TORCH, 1);
+    run_ms(100);
+    CHECK(F.torch && !faults(), "no arc OK yet must not latch");
+    F.inputs = IN(ARC_OK);
+    run_ms(10);
+    F.inputs = 0;
+    run_ms(49);
+    CHECK(F.torch, "ARC_LOST before arc_lost_ms");
+    run_ms(2);
+    CHECK(!F.torch && (faults() & FAULT(ARC_LOST)), "ARC_LOST not latched");
+    return 0;
+}
+
+/* Encode cost of a STATUS reply, in native ns (the AVR figure comes from simavr). */
+typedef int (*test_fn)(void);
+static const struct {
+    const char *name;
+    test_fn fn;
+} TESTS[] = {
+#define T(n) {#n, test_##n}
+    T(lease_expiry_within_one_tick),
+    T(frames_after_expiry_do_not_revive),
+    T(fault_rereported_every_250ms),
+    T(duplicate_replayed_not_reexecuted),
+    T(nak_with_rejected_frames_seq),
+    T(no_session_refusals),
+    T(hello_info_fields),
+    T(probe_stops_on_contact_in_tick),
+    T(probe_no_contact_and_limit),
+    T(z_velocity_stale_ignored_and_expiry),
+    T(soft_limit_latches_z_limit),
+    T(move_limits_and_upward_only),
+    T(move_trapezoid),
+    T(stop_supersede_query),
+    T(estop_breakaway_latch),
+    T(events_and_shared_counter),
+    T(ohmic_only_while_sensing),
+    T(configure_out_of_range),
+    T(calibration_and_filters),
+    T(batches),
+    T(unsupported_and_lease_range),
+    T(arc_lost),
+#undef T
+};
+#define N_TESTS (sizeof TESTS / sizeof TESTS[0])
+
+static int run(unsigned i)
+{
+    int failed;
+    setup();
+    why[0] = 0;
+    failed = TESTS[i].fn();
+    if (failed) {
+        printf("FAIL %s: %s\n", TESTS[i].name, why);
+    } else {
+        printf("ok %s\n", TESTS[i].name);
+    }
+    return failed;
+}
+
+int main(int argc, char **argv)
+{
+    int failed = 0, a;
+    unsigned i;
+    if (argc > 1 && strcmp(argv[1], "--list") == 0) {
+        for (i = 0; i < N_TESTS; i++) {
+            printf("%s\n", TESTS[i].name);
+        }
+        return 0;
+    }
+    if (argc == 1) {
+        for (i = 0; i < N_TESTS; i++) {
+            failed |= run(i);
+        }
+        return failed;
+    }
+    for (a = 1; a < argc; a++) {
+        for (i = 0; i < N_TESTS && strcmp(TESTS[i].name, argv[a]) != 0; i++) {
+        }
+        if (i == N_TESTS) {
+            printf("FAIL %s: no such test\n", argv[a]);
+            failed = 1;
+            continue;
+        }
+        failed |= run(i);
+    }
+    return failed;
+}

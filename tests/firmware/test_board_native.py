@@ -1,0 +1,99 @@
+"""The reference firmware's board logic (firmware/board/), built natively over a fake HAL.
+
+firmware/native/test_board.c holds the C test functions (lease expiry within one tick,
+duplicates replayed not re-executed, NAK with the rejected frame's seq, the probe's stop on
+contact in the tick, Z_VELOCITY staleness and expiry, soft limits, E-stop and breakaway
+latches, CONFIGURE refusals, the filters, ...); the program is compiled once per module
+with strict flags and ASan/UBSan, and each C test runs as its own pytest test. The AVR
+builds are checked to fit their MCUs.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIRMWARE = ROOT / "firmware"
+TEST_SOURCE = FIRMWARE / "native" / "test_board.c"
+SOURCES = (
+    TEST_SOURCE,
+    FIRMWARE / "native" / "hal_fake.c",
+    FIRMWARE / "board" / "board.c",
+    FIRMWARE / "board" / "board_cmd.c",
+    FIRMWARE / "board" / "board_motion.c",
+    ROOT / "firmware_protocol" / "c" / "dthc_protocol.c",
+)
+CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g")
+SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all")
+# The C tests, in the order test_board.c lists them (its TESTS table: T(name)).
+C_TESTS = re.findall(r"^\s+T\((\w+)\),$", TEST_SOURCE.read_text(), re.MULTILINE)
+# The Nano's 2 KB: what static RAM may take so the stack (nested tick, UART and step
+# interrupts under the main loop's deepest call) keeps its room.
+NANO_STACK_RESERVE_B = 600
+NANO_FLASH_B = 30 * 1024  # 32 KB less a 2 KB bootloader
+
+
+@pytest.fixture(scope="module")
+def test_board(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler")
+    exe = tmp_path_factory.mktemp("fw") / "test_board"
+    cmd = [compiler, *CFLAGS, *SANITIZE, *map(str, SOURCES), "-o", str(exe)]
+    subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=120)
+    return exe
+
+
+def test_c_tests_are_listed() -> None:
+    """The pattern finds the C test table (a renamed macro would silently run nothing)."""
+    assert len(C_TESTS) >= 20
+
+
+@pytest.mark.parametrize("name", C_TESTS)
+def test_board_logic(test_board: Path, name: str) -> None:
+    """One C test of the board logic passes (its name says what behaviour it proves)."""
+    proc = subprocess.run(
+        [str(test_board), name], capture_output=True, text=True, timeout=30, check=False
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.strip() == f"ok {name}"
+
+
+def _section_sizes(elf: Path) -> dict[str, int]:
+    out = subprocess.run(
+        ["avr-size", "-A", str(elf)], capture_output=True, text=True, check=True, timeout=30
+    ).stdout
+    sizes: dict[str, int] = {}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and parts[0].startswith(".") and parts[1].isdigit():
+            sizes[parts[0]] = int(parts[1])
+    return sizes
+
+
+@pytest.mark.skipif(shutil.which("avr-gcc") is None, reason="avr-gcc not installed")
+def test_avr_builds_fit(tmp_path: Path) -> None:
+    """`make -C firmware firmware` builds both MCUs with -Werror, prints the sizes, and the
+    Nano build leaves its stack reserve and fits below the bootloader."""
+    proc = subprocess.run(
+        ["make", "-C", str(FIRMWARE), f"BUILD={tmp_path}", "firmware"],
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "atmega2560  flash" in proc.stdout
+    assert "atmega328p  flash" in proc.stdout
+    for mcu, flash_b, ram_b, reserve_b in (
+        ("atmega2560", 253_952, 8192, 4096),
+        ("atmega328p", NANO_FLASH_B, 2048, NANO_STACK_RESERVE_B),
+    ):
+        sizes = _section_sizes(tmp_path / mcu / "dthc-firmware.elf")
+        flash = sizes[".text"] + sizes.get(".data", 0)
+        ram = sizes.get(".data", 0) + sizes.get(".bss", 0) + sizes.get(".noinit", 0)
+        assert flash <= flash_b, f"{mcu}: {flash} B of flash"
+        assert ram + reserve_b <= ram_b, f"{mcu}: {ram} B of static RAM"
+        assert (tmp_path / mcu / "dthc-firmware.hex").stat().st_size > 0
