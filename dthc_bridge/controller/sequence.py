@@ -150,6 +150,7 @@ class CutSequence:
         self._actions: list[act.Action] = []
         self._move_token = 0
         self._creep_sensor_ohmic = False
+        self._contact_z_mm = math.nan  # where the last probe's sensor fired
         self._pending_reply: str | None = None
         self.safe_z_mm = self.config.z_max_mm - self.config.top_margin_mm
         self.warnings: list[str] = []
@@ -529,6 +530,7 @@ class CutSequence:
             return
         self.cut.zero_mm = math.nan
         self._creep_sensor_ohmic = ohmic
+        self._contact_z_mm = contact_z_mm
         self._enter(State.CREEP_UP)
         self._emit(act.SwitchOhmicSense(ohmic))
         self._move(stop_z_mm + cfg.float_travel_mm + 2.0, cfg.creep_speed_mm_s)
@@ -536,8 +538,13 @@ class CutSequence:
     def _released(self) -> None:
         assert self.cut is not None
         cfg = self.config
-        offset = cfg.ohmic_offset_mm if self._creep_sensor_ohmic else cfg.float_travel_mm
-        self.cut.zero_mm = self._z_mm + offset
+        if self._creep_sensor_ohmic:
+            self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
+        else:
+            # The float switch closes at its travel but opens lower (hysteresis): the zero
+            # comes from where it closed, latched by the board on the way down; the creep
+            # up only lifts the torch off the plate.
+            self.cut.zero_mm = self._contact_z_mm + cfg.float_travel_mm
         self.last_zero_mm = self.cut.zero_mm
         self.probe_required = False
         self._emit(act.SwitchOhmicSense(False))

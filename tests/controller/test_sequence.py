@@ -341,6 +341,16 @@ def test_auto_voltage_is_taken_before_a_warped_plate_drifts_and_thc_waits_for_th
     assert not sequence.thc.frozen
 
 
+def test_a_float_switch_probe_sets_the_height_where_the_switch_closed() -> None:
+    """painted_plate (no ohmic contact): the zero is the board's latched contact plus the
+    float travel, so the switch's 0.1 mm hysteresis (it opens lower than it closes, on the
+    creep up) does not raise the torch: the cut starts within 0.03 mm of its height."""
+    loop = ready("painted_plate")
+    assert loop.m3().ok
+    loop.run_until(lambda: loop.plant.zaxis.is_idle, 2)
+    assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.03)
+
+
 def test_puddle_jump_answers_m3_early_and_then_lowers_to_cut_height() -> None:
     """With a puddle jump, XY may start at the puddle height; Z then goes to cut height."""
     loop = ready(config=SequenceConfig(puddle_height_percent=150.0, puddle_delay_s=0.2))
