@@ -8,8 +8,8 @@
  * Timer2 (CTC, 25 kHz) is the step generator: a 32-bit phase accumulator (DDA), one STEP
  * pulse per carry, one period long; idle (interrupt off) while Z stands still.
  * UART0 at DTHC_UART_BAUD: RX and TX ring buffers, both served by interrupts.
- * The ADC converts continuously (restarted from its interrupt) and the tick takes the
- * mean of the conversions since the previous tick.
+ * The ADC converts a burst of ADC_BURST conversions per tick; the next tick takes their
+ * mean.
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -307,21 +307,23 @@ static void timer2_init(void)
 
 /* --- ADC ------------------------------------------------------------------------------------ */
 
-#define ADC_MAX_SUM_N 64 /* 64 x 1023 x 25000 still fits 32 bits */
+#define ADC_BURST 4 /* conversions per sample, averaged (about 420 us at 125 kHz) */
 static volatile uint16_t adc_sum;
 static volatile uint8_t adc_n;
+static volatile uint8_t adc_left;
 static uint16_t arc_last_cv;
 
 ISR(ADC_vect)
 {
-    uint16_t v = ADC;
-    if (adc_n < ADC_MAX_SUM_N) {
-        adc_sum += v;
-        adc_n++;
+    adc_sum += ADC;
+    adc_n++;
+    if (--adc_left) {
+        ADCSRA |= _BV(ADSC);
     }
-    ADCSRA |= _BV(ADSC); /* next conversion */
 }
 
+/* The mean of the burst started at the previous tick, then the next burst. Bursts, not a
+ * free-running ADC: a few interrupts per sample instead of ten (cheaper on simavr too). */
 uint16_t hal_arc_raw(void)
 {
     uint16_t sum;
@@ -332,6 +334,10 @@ uint16_t hal_arc_raw(void)
         n = adc_n;
         adc_sum = 0;
         adc_n = 0;
+        adc_left = ADC_BURST;
+        if (!(ADCSRA & _BV(ADSC))) {
+            ADCSRA |= _BV(ADSC);
+        }
     }
     if (n) {
         /* Arc centivolts = counts * Vref_mV * divider / 1024 / 10, from the mean. */
@@ -355,12 +361,12 @@ static void adc_init(void)
 #if defined(MUX5)
     ADCSRB = (PIN_ARC_ADC & 0x08) ? _BV(MUX5) : 0;
 #endif
-    ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0); /* 125 kHz: ~9.6k conv/s */
+    ADCSRA = _BV(ADEN) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0); /* 125 kHz: 104 us/conv */
 }
 
 static void adc_start(void)
 {
-    ADCSRA |= _BV(ADIE) | _BV(ADSC);
+    ADCSRA |= _BV(ADIE);
 }
 
 /* --- outputs and inputs ---------------------------------------------------------------------- */
@@ -451,6 +457,33 @@ uint32_t hal_entropy32(void)
     noinit_pool[1] ^= h; /* the next start sees this one's result too */
     return h;
 }
+
+/* --- stack watermark (the measuring build) ------------------------------------------------------ */
+
+#ifdef BOARD_TIMING
+extern uint8_t __heap_start; /* the end of .bss/.noinit: the stack may grow down to here */
+#define STACK_PAINT 0xA5
+
+/* Painted before main() runs, so every byte the stack ever touches is overwritten. */
+void stack_paint(void) __attribute__((naked, used, section(".init1")));
+void stack_paint(void)
+{
+    uint8_t *p = &__heap_start;
+    while (p < (uint8_t *)SP - 2) {
+        *p++ = STACK_PAINT;
+    }
+}
+
+/* Bytes between the static data and the deepest the stack has reached. */
+uint16_t hal_stack_unused(void)
+{
+    const uint8_t *p = &__heap_start;
+    while (*p == STACK_PAINT) {
+        p++;
+    }
+    return (uint16_t)(p - &__heap_start);
+}
+#endif
 
 /* --- start ------------------------------------------------------------------------------------ */
 

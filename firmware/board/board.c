@@ -10,8 +10,12 @@
 
 board_t B;
 uint8_t board_small_tx[BOARD_SMALL_TX];
-static uint8_t samples_tx[BOARD_SAMPLES_TX];
-#define SAMPLES_AT (samples_tx + DTHC_TX_PAYLOAD_OFFSET)
+/* Two SAMPLES buffers: the tick fills one while the main loop encodes and queues the
+ * other (the encode costs about 0.2 ms on AVR: kept out of the tick). */
+static uint8_t samples_tx[2][BOARD_SAMPLES_TX];
+static uint8_t samples_fill;                /* the buffer the tick fills */
+static volatile uint8_t samples_ready_len;  /* payload bytes waiting in the other; 0: free */
+#define SAMPLES_AT (samples_tx[samples_fill] + DTHC_TX_PAYLOAD_OFFSET)
 
 /* --- sending from the tick (or from the main loop with the tick locked) ---------------- */
 
@@ -188,26 +192,31 @@ static void report_faults(void)
 
 /* --- sampling ------------------------------------------------------------------------------ */
 
+/* Calibrated centivolts, clamped to what SAMPLES carry (0..655.35 V): 32-bit only. */
 static int32_t calibrate(uint16_t raw)
 {
-    int64_t diff = (int64_t)raw - B.cal_offset;
-    int64_t p;
-    /* Beyond 2^24 counts every result saturates anyway; keeps the product in 64 bits. */
-    if (diff > (1L << 24)) {
-        diff = 1L << 24;
-    } else if (diff < -(1L << 24)) {
-        diff = -(1L << 24);
+    int32_t diff;
+    uint32_t p;
+    /* Beyond 2^17 counts every result saturates for any scale worth having, and the
+     * product with a 14-bit mantissa stays inside 31 bits. */
+    if (B.cal_offset < -(1L << 17)) {
+        diff = 1L << 17;
+    } else {
+        diff = (int32_t)raw - B.cal_offset;
+        if (diff > (1L << 17)) {
+            diff = 1L << 17;
+        }
     }
-    p = diff * (int64_t)B.scale_m;
-    if (B.scale_sh) {
-        p = (p + ((int64_t)1 << (B.scale_sh - 1))) >> B.scale_sh;
+    if (diff <= 0) {
+        return 0; /* negative volts: SAMPLES carry 0 */
     }
-    if (p > 0x7FFFFFFFL) {
-        p = 0x7FFFFFFFL;
-    } else if (p < -0x7FFFFFFFL) {
-        p = -0x7FFFFFFFL;
+    p = (uint32_t)diff * B.scale_m;
+    if (B.scale_sh > 31) {
+        p = 0;
+    } else if (B.scale_sh) {
+        p = (p + (1UL << (B.scale_sh - 1))) >> B.scale_sh;
     }
-    return (int32_t)p;
+    return p > 0xFFFFu ? 0xFFFF : (int32_t)p;
 }
 
 static int32_t filter(int32_t cv)
@@ -250,13 +259,18 @@ static int32_t filter(int32_t cv)
         return c;
     }
     case DTHC_FILTER_LOW_PASS: {
-        int32_t x = cv * 256;
+        /* y += alpha * (x - y), y in 1/256 cV: |x - y| < 2^24 split so that every
+         * product fits 32 bits unsigned. */
+        int32_t d = cv * 256 - B.lp_q8;
+        uint32_t mag = (uint32_t)(d < 0 ? -d : d);
+        uint32_t step;
         if (!B.hist_len) {
             B.hist_len = 1;
-            B.lp_q8 = x;
-        } else {
-            B.lp_q8 += (int32_t)(((int64_t)(x - B.lp_q8) * B.lp_alpha_q16) >> 16);
+            B.lp_q8 = cv * 256;
+            return cv;
         }
+        step = (((mag >> 8) * B.lp_alpha_q16) >> 8) + (((mag & 0xFFu) * B.lp_alpha_q16) >> 16);
+        B.lp_q8 += d < 0 ? -(int32_t)step : (int32_t)step;
         return (B.lp_q8 + 128) >> 8;
     }
     default:
@@ -268,7 +282,6 @@ static void send_batch(void)
 {
     uint8_t *p = SAMPLES_AT;
     uint8_t len = (uint8_t)(DTHC_SAMPLES_HEADER_SIZE + 2u * B.n_batch);
-    size_t n;
     dthc_put_u16(p, B.sample_seq);
     dthc_put_u32(p + 2, B.batch_t0_us);
     dthc_put_u16(p + 6, B.period_us);
@@ -277,22 +290,46 @@ static void send_batch(void)
     dthc_put_u16(p + 14, B.zvel_seq);
     dthc_put_u16(p + 16, DTHC_XY_SPEED_UNKNOWN);
     p[18] = board_status_bits();
-    n = dthc_encode_frame(DTHC_MSG_SAMPLES, 0, p, len, samples_tx, sizeof samples_tx);
-    /* A batch that does not fit is lost: the host sees the stream_seq gap, and the next
-     * batch says SAMPLE_OVERFLOW. */
-    B.sample_overflow = !hal_uart_write(samples_tx, (uint16_t)n);
+    if (!samples_ready_len) {
+        samples_ready_len = len;
+        samples_fill ^= 1u;
+        B.sample_overflow = false;
+    } else {
+        /* The previous batch is still waiting: this one is lost. The host sees the
+         * stream_seq gap, and the next batch says SAMPLE_OVERFLOW. */
+        B.sample_overflow = true;
+    }
     B.sample_seq++;
     B.n_batch = 0;
+}
+
+/* Main loop: encode and queue a completed batch. */
+bool board_flush_samples(void)
+{
+    uint8_t len = samples_ready_len;
+    uint8_t *buf;
+    size_t n;
+    uint16_t spins = 0;
+    if (!len) {
+        return false;
+    }
+    buf = samples_tx[samples_fill ^ 1u]; /* the tick does not swap while len != 0 */
+    n = dthc_encode_frame(DTHC_MSG_SAMPLES, 0, buf + DTHC_TX_PAYLOAD_OFFSET, len, buf,
+                          BOARD_SAMPLES_TX);
+    while (hal_uart_tx_free() < n && ++spins) {
+    }
+    hal_tick_lock();
+    if (!hal_uart_write(buf, (uint16_t)n)) {
+        B.sample_overflow = true;
+    }
+    samples_ready_len = 0;
+    hal_tick_unlock();
+    return true;
 }
 
 static void sample(void)
 {
     int32_t cv = filter(calibrate(hal_arc_raw()));
-    if (cv < 0) {
-        cv = 0;
-    } else if (cv > 0xFFFF) {
-        cv = 0xFFFF;
-    }
     if (!B.n_batch) {
         B.batch_t0_us = B.now_us;
     }
@@ -312,16 +349,16 @@ static bool set_scale(float scale)
     if (!(scale > 0.0f) || scale > 3.0e38f) {
         return false; /* not positive, NaN or infinite */
     }
-    while (x < 8388608.0f && sh < 62) { /* mantissa into [2^23, 2^24) */
+    while (x < 8192.0f && sh < 40) { /* a 14-bit mantissa: [2^13, 2^14) */
         x *= 2.0f;
         sh++;
     }
-    while (x >= 16777216.0f && sh > 0) {
+    while (x >= 16384.0f && sh > 0) {
         x *= 0.5f;
         sh--;
     }
-    if (x >= 16777216.0f) {
-        x = 16777215.0f; /* >= 2^24 cV per count: every non-zero reading saturates */
+    if (x >= 16383.5f) {
+        x = 16383.0f; /* >= 2^14 cV per count: every non-zero reading saturates */
     }
     B.scale_m = (uint32_t)(x + 0.5f);
     B.scale_sh = (uint8_t)sh;
@@ -403,8 +440,15 @@ void board_init(const board_config_t *cfg, uint32_t entropy)
     board_z_init();
 }
 
+#ifdef BOARD_TIMING
+uint16_t board_tick_max_us;
+#endif
+
 void board_tick(uint32_t t_us)
 {
+#ifdef BOARD_TIMING
+    uint32_t start = hal_time_us();
+#endif
     B.now_us = t_us;
     read_inputs();
     check_safety();
@@ -413,4 +457,10 @@ void board_tick(uint32_t t_us)
     if (B.faults && (uint32_t)(B.now_us - B.last_fault_report_us) >= BOARD_FAULT_REPEAT_US) {
         report_faults();
     }
+#ifdef BOARD_TIMING
+    start = hal_time_us() - start;
+    if (start > board_tick_max_us) {
+        board_tick_max_us = (uint16_t)start;
+    }
+#endif
 }

@@ -105,6 +105,15 @@ static uint8_t hello_info(void)
     return 45;
 }
 
+#ifdef BOARD_TIMING
+/* A measuring build (make BOARD_TIMING=1): STATUS.current_da carries the longest tick in
+ * us, STATUS.rx_duplicates how long the previous STATUS took to encode, in us, and
+ * STATUS.rx_crc_errors the stack bytes never used so far (the port's hal_stack_unused). */
+extern uint16_t board_tick_max_us;
+uint16_t hal_stack_unused(void);
+static uint16_t status_encode_us;
+#endif
+
 static uint16_t sat16(uint32_t v)
 {
     return v > 0xFFFFu ? 0xFFFFu : (uint16_t)v;
@@ -127,6 +136,11 @@ static uint8_t status(void)
     dthc_put_u16(p + 29, sat16(board_rx.crc_errors));
     dthc_put_u16(p + 31, sat16(board_rx.framing_errors));
     dthc_put_u16(p + 33, B.rx_duplicates);
+#ifdef BOARD_TIMING
+    dthc_put_u16(p + 27, board_tick_max_us);
+    dthc_put_u16(p + 33, status_encode_us);
+    dthc_put_u16(p + 29, hal_stack_unused());
+#endif
     return 35;
 }
 
@@ -137,7 +151,17 @@ static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
     size_t n;
     uint16_t spins = 0;
     hal_tick_unlock();
+#ifdef BOARD_TIMING
+    {
+        uint32_t t0 = hal_time_us();
+        n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
+        if (type == DTHC_MSG_STATUS) {
+            status_encode_us = (uint16_t)(hal_time_us() - t0);
+        }
+    }
+#else
     n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
+#endif
     while (hal_uart_tx_free() < n && ++spins) {
         /* the transmit interrupt drains the ring; the tick keeps running */
     }
@@ -376,7 +400,7 @@ static void frame(const dthc_frame_t *f)
 bool board_poll(void)
 {
     uint8_t budget = POLL_BYTES_MAX;
-    bool did = false;
+    bool did = board_flush_samples();
     while (budget--) {
         dthc_frame_t f;
         int rc;

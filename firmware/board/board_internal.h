@@ -91,7 +91,7 @@ typedef struct {
     uint16_t filter_param;
     uint16_t arc_lost_ms;
     int32_t cal_offset;
-    uint32_t scale_m; /* cv = (raw - cal_offset) * scale_m >> scale_sh */
+    uint32_t scale_m; /* cv = (raw - cal_offset) * scale_m >> scale_sh, scale_m < 2^14 */
     uint8_t scale_sh;
     uint16_t lp_alpha_q16;
     int32_t hist[BOARD_MA_MAX];
@@ -136,6 +136,7 @@ void board_set_torch(bool on);
 void board_set_ohmic(bool on);
 bool board_configure(const uint8_t *p, uint8_t *bad_field);
 void board_send_small(uint8_t type, uint8_t seq, uint8_t len);
+bool board_flush_samples(void);
 extern uint8_t board_small_tx[BOARD_SMALL_TX];
 #define BOARD_SMALL_PAYLOAD_AT (board_small_tx + DTHC_TX_PAYLOAD_OFFSET)
 

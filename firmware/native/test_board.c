@@ -88,9 +88,14 @@ static uint8_t send(uint8_t type, const uint8_t *payload, uint8_t len)
     return seq;
 }
 
+/* Run ms, the main loop polled after every tick (it queues the SAMPLES batches). */
 static void run_ms(uint32_t ms)
 {
-    fake_run_us(ms * 1000u);
+    while (ms--) {
+        fake_run_us(1000u);
+        while (board_poll()) {
+        }
+    }
     parse();
 }
 
@@ -397,6 +402,8 @@ static int test_probe_stops_on_contact_in_tick(void)
     mark = n_out;
     F.inputs = IN(FLOAT);
     fake_run_us(F.next_tick_us - (uint32_t)F.now_us); /* exactly one tick */
+    while (board_poll()) {
+    }
     parse();
     CHECK(F.rate > -5000 * 200 / 1000, "no deceleration in the contact tick (rate %d)",
           (int)F.rate);
