@@ -308,6 +308,10 @@ static void timer2_init(void)
 /* --- ADC ------------------------------------------------------------------------------------ */
 
 #define ADC_BURST 4 /* conversions per sample, averaged (about 420 us at 125 kHz) */
+#define ADC_BURST_LOG2 2
+#define ARC_CV_PER_COUNT_X1024 ((uint32_t)DTHC_ADC_REF_MV * DTHC_ARC_DIVIDER / 10u)
+/* 4 x 1023 counts times the factor must fit 32 bits. */
+typedef char hal_arc_scale_fits[(ARC_CV_PER_COUNT_X1024 <= 1000000UL) ? 1 : -1];
 static volatile uint16_t adc_sum;
 static volatile uint8_t adc_n;
 static volatile uint8_t adc_left;
@@ -339,10 +343,12 @@ uint16_t hal_arc_raw(void)
             ADCSRA |= _BV(ADSC);
         }
     }
-    if (n) {
-        /* Arc centivolts = counts * Vref_mV * divider / 1024 / 10, from the mean. */
-        arc_last_cv = (uint16_t)(((uint32_t)sum * ((uint32_t)DTHC_ADC_REF_MV * DTHC_ARC_DIVIDER / 10u)
-                                  / n) >> 10);
+    /* Arc centivolts = counts * Vref_mV * divider / 1024 / 10, from the mean; a whole
+     * burst divides by a shift (the usual case: no 40 us division in the tick). */
+    if (n == ADC_BURST) {
+        arc_last_cv = (uint16_t)(((uint32_t)sum * ARC_CV_PER_COUNT_X1024) >> (10 + ADC_BURST_LOG2));
+    } else if (n) {
+        arc_last_cv = (uint16_t)(((uint32_t)sum * ARC_CV_PER_COUNT_X1024 / n) >> 10);
     }
     return arc_last_cv;
 }

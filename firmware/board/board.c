@@ -442,6 +442,9 @@ void board_init(const board_config_t *cfg, uint32_t entropy)
 
 #ifdef BOARD_TIMING
 uint16_t board_tick_max_us;
+uint32_t board_tick_sum_us; /* over the last 1024 ticks: their mean, for STATUS */
+uint16_t board_tick_n;
+uint16_t board_tick_mean_us;
 #endif
 
 void board_tick(uint32_t t_us)
@@ -461,6 +464,12 @@ void board_tick(uint32_t t_us)
     start = hal_time_us() - start;
     if (start > board_tick_max_us) {
         board_tick_max_us = (uint16_t)start;
+    }
+    board_tick_sum_us += start;
+    if (++board_tick_n == 1024) {
+        board_tick_mean_us = (uint16_t)(board_tick_sum_us / 1024u);
+        board_tick_sum_us = 0;
+        board_tick_n = 0;
     }
 #endif
 }

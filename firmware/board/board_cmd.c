@@ -108,8 +108,10 @@ static uint8_t hello_info(void)
 #ifdef BOARD_TIMING
 /* A measuring build (make BOARD_TIMING=1): STATUS.current_da carries the longest tick in
  * us, STATUS.rx_duplicates how long the previous STATUS took to encode, in us, and
- * STATUS.rx_crc_errors the stack bytes never used so far (the port's hal_stack_unused). */
+ * STATUS.rx_crc_errors the stack bytes never used so far (the port's hal_stack_unused),
+ * STATUS.rx_framing_errors the mean tick of the last 1024, in us. */
 extern uint16_t board_tick_max_us;
+extern uint16_t board_tick_mean_us;
 uint16_t hal_stack_unused(void);
 static uint16_t status_encode_us;
 #endif
@@ -140,6 +142,7 @@ static uint8_t status(void)
     dthc_put_u16(p + 27, board_tick_max_us);
     dthc_put_u16(p + 33, status_encode_us);
     dthc_put_u16(p + 29, hal_stack_unused());
+    dthc_put_u16(p + 31, board_tick_mean_us);
 #endif
     return 35;
 }
