@@ -107,13 +107,17 @@ static uint8_t hello_info(void)
 
 #ifdef BOARD_TIMING
 /* A measuring build (make BOARD_TIMING=1): STATUS.current_da carries the longest tick in
- * us, STATUS.rx_duplicates how long the previous STATUS took to encode, in us, and
+ * us, STATUS.rx_duplicates how long the previous STATUS took from its QUERY's last byte
+ * decoded to its reply queued, in us, and
  * STATUS.rx_crc_errors the stack bytes never used so far (the port's hal_stack_unused),
  * STATUS.rx_framing_errors the mean tick of the last 1024, in us. */
 extern uint16_t board_tick_max_us;
 extern uint16_t board_tick_mean_us;
 uint16_t hal_stack_unused(void);
 static uint16_t status_encode_us;
+static uint32_t frame_done_us;
+static uint16_t stack_unused;
+static bool stack_scan_due;
 #endif
 
 static uint16_t sat16(uint32_t v)
@@ -141,7 +145,7 @@ static uint8_t status(void)
 #ifdef BOARD_TIMING
     dthc_put_u16(p + 27, board_tick_max_us);
     dthc_put_u16(p + 33, status_encode_us);
-    dthc_put_u16(p + 29, hal_stack_unused());
+    dthc_put_u16(p + 29, stack_unused);
     dthc_put_u16(p + 31, board_tick_mean_us);
 #endif
     return 35;
@@ -154,22 +158,18 @@ static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
     size_t n;
     uint16_t spins = 0;
     hal_tick_unlock();
-#ifdef BOARD_TIMING
-    {
-        uint32_t t0 = hal_time_us();
-        n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
-        if (type == DTHC_MSG_STATUS) {
-            status_encode_us = (uint16_t)(hal_time_us() - t0);
-        }
-    }
-#else
     n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
-#endif
     while (hal_uart_tx_free() < n && ++spins) {
         /* the transmit interrupt drains the ring; the tick keeps running */
     }
     hal_tick_lock();
     (void)hal_uart_write(query_tx, (uint16_t)n);
+#ifdef BOARD_TIMING
+    if (type == DTHC_MSG_STATUS) {
+        status_encode_us = (uint16_t)(hal_time_us() - frame_done_us);
+        stack_scan_due = true; /* a slow scan: later, with the tick running */
+    }
+#endif
 }
 
 /* --- commands (tick locked) --------------------------------------------------------------- */
@@ -417,6 +417,9 @@ bool board_poll(void)
             continue;
         }
         if (rc == 1 || rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) {
+#ifdef BOARD_TIMING
+            frame_done_us = hal_time_us();
+#endif
             finalise_boot_id();
             hal_tick_lock();
             if (rc == 1) {
@@ -429,6 +432,12 @@ bool board_poll(void)
                 }
             }
             hal_tick_unlock();
+#ifdef BOARD_TIMING
+            if (stack_scan_due) {
+                stack_scan_due = false;
+                stack_unused = hal_stack_unused();
+            }
+#endif
         }
     }
     return did;
