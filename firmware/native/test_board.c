@@ -791,7 +791,36 @@ static int test_arc_lost(void)
     return 0;
 }
 
-/* Encode cost of a STATUS reply, in native ns (the AVR figure comes from simavr). */
+/* A limit switch blocks motion towards it at once and latches Z_LIMIT when driven into;
+ * moving away (up from the min switch) stays allowed, and FAULT_RESET clears it. */
+static int test_limit_switch_stops_and_latches(void)
+{
+    uint8_t seq;
+    const frame_t *f;
+    int32_t steps;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    z_move(20000, 20000);
+    run_ms(300);
+    CHECK(F.rate < 0, "not moving down");
+    F.inputs = IN(Z_LIMIT_MIN);
+    run_ms(1);
+    steps = F.steps;
+    f = last(DTHC_MSG_FAULT, -1, 0);
+    CHECK(f && f->p[8] == DTHC_FAULT_Z_LIMIT && f->p[9] == 0, "no Z_LIMIT min fault");
+    CHECK(F.lo == steps, "the step generator may still step down (lo %d, at %d)", (int)F.lo,
+          (int)steps);
+    run_ms(50);
+    CHECK(F.steps == steps, "Z moved %d steps past the switch", (int)(steps - F.steps));
+    seq = z_move(dthc_get_i32(status()->p + 23) + 5000, 20000);
+    CHECK(is_ack(seq, 0), "moving up off the switch refused");
+    F.inputs = 0;
+    run_ms(600);
+    seq = cmd_u16(DTHC_MSG_FAULT_RESET, FAULT(Z_LIMIT));
+    CHECK(is_ack(seq, 0) && !faults(), "Z_LIMIT not cleared");
+    return 0;
+}
+
 typedef int (*test_fn)(void);
 static const struct {
     const char *name;
@@ -820,6 +849,7 @@ static const struct {
     T(batches),
     T(unsupported_and_lease_range),
     T(arc_lost),
+    T(limit_switch_stops_and_latches),
 #undef T
 };
 #define N_TESTS (sizeof TESTS / sizeof TESTS[0])
