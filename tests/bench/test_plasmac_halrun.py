@@ -27,7 +27,7 @@ pytestmark = [
 
 @pytest.mark.timeout(300)
 def test_a_recorded_run_replays_identically_in_linuxcnc() -> None:
-    """warped_sheet, 250 mm with a slow-down: probing, pierce, THC moving Z, corner lock,
+    """warped_sheet, 150 mm and a slow-down: probing, pierce, THC moving Z, corner lock,
     M5 and the end of the job; every period's outputs match, and the one-period shift
     mismatches in hundreds of periods (the check can fail)."""
     try:
@@ -38,7 +38,7 @@ def test_a_recorded_run_replays_identically_in_linuxcnc() -> None:
     with PlasmacComponent(plasmac.component, plasmac.shim) as comp:
         host = PlasmacHost(plant, comp, PlasmacSettings(use_auto_volts=True), record=True)
         plant.gantry.feed_line("G21 G90")
-        for plan in plan_cuts(load_scenario("warped_sheet").default_program, max_path_mm=250):
+        for plan in plan_cuts(load_scenario("warped_sheet").default_program, max_path_mm=150):
             assert host.cut(plan, slow_percent=50.0) is None
         host.end_job()
         types = {name: pin.type for name, pin in comp.pins.items()}

@@ -130,7 +130,7 @@ def replay(
                 f"net o{k} {outputs[k][0]} => sampler.{ch}.pin.{j}" for j, k in enumerate(chunk)
             ]
         # The thread runs a little longer than the data (the samplers keep the first n).
-        lines += ["start", f"loadusr -w sleep {n / 1000.0 * 1.5 + 2.0:.1f}", "stop"]
+        lines += ["start", f"loadusr -w sleep {n / 1000.0 * 1.25 + 1.0:.1f}", "stop"]
         lines += [
             f"loadusr -w halsampler -c {ch} -n {n} {work / f'out{ch}.txt'}"
             for ch in range(len(out_chunks))
