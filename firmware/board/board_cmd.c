@@ -403,7 +403,7 @@ static void frame(const dthc_frame_t *f)
 bool board_poll(void)
 {
     uint8_t budget = POLL_BYTES_MAX;
-    bool did = board_flush_samples();
+    bool did = false;
     while (budget--) {
         dthc_frame_t f;
         int rc;
@@ -440,5 +440,6 @@ bool board_poll(void)
 #endif
         }
     }
-    return did;
+    /* Replies first: a batch waiting here is not time-critical, a reply is (1 ms). */
+    return board_flush_samples() || did;
 }
