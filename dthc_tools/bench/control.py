@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import multiprocessing
 import os
+import sys
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -324,6 +325,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
 
 
+def _to_stderr(message: str) -> None:
+    """Fetching LinuxCNC, or skipping plasmac, is said even under --json (stdout is the
+    report's)."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def _provision_plasmac(
     args: argparse.Namespace, say: Callable[[str], None]
 ) -> tuple[Provisioned | None, dict[str, object]]:
@@ -359,7 +366,7 @@ def run(
     plasmac: Provisioned | None = None
     plasmac_info: dict[str, object] = {"available": False, "reason": "not asked for"}
     if any(k.startswith("plasmac") for k in kinds):
-        plasmac, plasmac_info = _provision_plasmac(args, say)
+        plasmac, plasmac_info = _provision_plasmac(args, _to_stderr)
         if plasmac is None:
             kinds = [k for k in kinds if not k.startswith("plasmac")]
     reference = ReferenceConfig(void_threshold_cycles=args.reference_void_cycles)
