@@ -59,6 +59,23 @@ static uint16_t tx_head;          /* written by the producers (tick, locked main
 static volatile uint16_t tx_tail; /* written by the UDRE interrupt */
 volatile uint16_t hal_rx_overruns;
 
+/* Arrival times of the delimiters in the receive ring, in order (the lease runs from a
+ * frame's arrival), as the low 16 bits of the µs clock: the main loop takes a frame's age
+ * from them, which is exact while it is less than 65 ms behind (the ring holds 5 ms of
+ * line time at 1 Mbaud). More than HAL_DELIM_TIMES frames behind, the main loop takes a
+ * later frame's time for an older one, so the lease runs from a little later. */
+#ifndef HAL_DELIM_TIMES
+#if defined(__AVR_ATmega328P__)
+#define HAL_DELIM_TIMES 4 /* RAM is short on the Nano */
+#else
+#define HAL_DELIM_TIMES 16
+#endif
+#endif
+static volatile uint16_t delim_us16[HAL_DELIM_TIMES];
+static volatile uint8_t delim_in; /* written by the RX interrupt */
+static uint8_t delim_out;         /* written by the main loop */
+static uint32_t last_delim_us;
+
 ISR(UART_RX_vect)
 {
     uint8_t b = UDR0;
@@ -69,6 +86,10 @@ ISR(UART_RX_vect)
     }
     rx_ring[rx_head] = b;
     rx_head = next;
+    if (b == 0) {
+        delim_us16[delim_in & (HAL_DELIM_TIMES - 1u)] = (uint16_t)hal_time_us();
+        delim_in++;
+    }
 }
 
 ISR(UART_UDRE_vect)
@@ -91,8 +112,25 @@ int16_t hal_uart_getc(void)
         return -1;
     }
     b = rx_ring[rx_tail];
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { rx_tail = (uint16_t)((rx_tail + 1u) & (HAL_RX_RING - 1u)); }
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        rx_tail = (uint16_t)((rx_tail + 1u) & (HAL_RX_RING - 1u));
+        if (b == 0) {
+            if ((uint8_t)(delim_in - delim_out) > HAL_DELIM_TIMES) {
+                delim_out = (uint8_t)(delim_in - HAL_DELIM_TIMES); /* overwritten: see above */
+            }
+            uint32_t now = hal_time_us();
+            uint16_t age = (uint16_t)((uint16_t)now - delim_us16[delim_out & (HAL_DELIM_TIMES - 1u)]);
+            last_delim_us = now - age;
+            delim_out++;
+        }
+    }
     return b;
+}
+
+uint32_t hal_uart_delimiter_us(void)
+{
+    return last_delim_us;
 }
 
 bool hal_uart_rx_pending(void)

@@ -355,10 +355,12 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
     }
 }
 
+/* The lease runs from the frame's arrival (its delimiter's receive interrupt), not from
+ * now: the main loop may decode it up to a millisecond later. */
 static void renew_lease(void)
 {
     if (B.session && !B.lease_expired) {
-        B.last_rx_us = hal_time_us();
+        B.last_rx_us = hal_uart_delimiter_us();
     }
 }
 

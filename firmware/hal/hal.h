@@ -40,6 +40,10 @@ void hal_tick_unlock(void);
 
 /* The next received byte, or -1 when none is waiting. */
 int16_t hal_uart_getc(void);
+/* When the last 0x00 that hal_uart_getc returned arrived (taken in the receive interrupt).
+ * A frame is valid from its delimiter's arrival, so the host lease runs from there, not
+ * from when the main loop got round to decoding it (up to a millisecond later). */
+uint32_t hal_uart_delimiter_us(void);
 /* Free bytes in the transmit ring. */
 uint16_t hal_uart_tx_free(void);
 /* Queue n bytes for transmission, all or nothing; false (nothing queued) when they do not

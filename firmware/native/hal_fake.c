@@ -23,6 +23,9 @@ void fake_rx(const uint8_t *data, unsigned n)
         F.rx_pos = F.rx_len = 0;
     }
     memcpy(F.rx + F.rx_len, data, n);
+    for (unsigned i = 0; i < n; i++) {
+        F.rx_at_us[F.rx_len + i] = (uint32_t)F.now_us;
+    }
     F.rx_len += n;
 }
 
@@ -87,7 +90,15 @@ int16_t hal_uart_getc(void)
     if (F.rx_pos >= F.rx_len) {
         return -1;
     }
+    if (F.rx[F.rx_pos] == 0) {
+        F.delimiter_us = F.rx_at_us[F.rx_pos];
+    }
     return F.rx[F.rx_pos++];
+}
+
+uint32_t hal_uart_delimiter_us(void)
+{
+    return F.delimiter_us;
 }
 
 uint16_t hal_uart_tx_free(void)

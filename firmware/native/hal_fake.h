@@ -19,7 +19,9 @@ typedef struct {
     int32_t lo, hi;
     int64_t phase_us;       /* fractional steps, in step-microseconds */
     uint8_t rx[4096];
+    uint32_t rx_at_us[4096]; /* when each queued byte arrived */
     unsigned rx_len, rx_pos;
+    uint32_t delimiter_us;   /* arrival of the last 0x00 hal_uart_getc returned */
     uint8_t tx[65536];
     unsigned tx_len;
     unsigned tx_cap;        /* ring space the fake pretends to have */

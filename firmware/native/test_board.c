@@ -255,6 +255,38 @@ static int test_lease_expiry_within_one_tick(void)
     return 0;
 }
 
+/* A frame the main loop decodes late (it was busy) renews the lease from the frame's
+ * arrival, so the torch still drops one lease after the host's last frame arrived. */
+static int test_lease_runs_from_the_frames_arrival(void)
+{
+    uint8_t wire[DTHC_MAX_WIRE_FRAME];
+    unsigned mark;
+    size_t n;
+    uint32_t t_arrival;
+    const frame_t *f;
+    hello();
+    cmd_u8(DTHC_MSG_TORCH, 1);
+    run_ms(100);
+    n = dthc_encode_frame(DTHC_MSG_HEARTBEAT, next_seq++, NULL, 0, wire, sizeof wire);
+    fake_rx(wire, (unsigned)n);
+    t_arrival = (uint32_t)F.now_us;
+    fake_run_us(3000u); /* the main loop busy: the frame waits 3 ms in the receive ring */
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(F.torch, "the torch went off before the heartbeat was decoded");
+    mark = n_out;
+    run_ms(246); /* 249 ms after the arrival */
+    CHECK(F.torch, "torch off before the lease from the heartbeat's arrival");
+    run_ms(2);
+    f = last(DTHC_MSG_FAULT, -1, mark);
+    CHECK(!F.torch, "torch on %u us after the heartbeat arrived",
+          (unsigned)((uint32_t)F.now_us - t_arrival));
+    CHECK(f && dthc_get_u32(f->p + 4) - t_arrival <= 251000u, "fault %u us after arrival",
+          f ? (unsigned)(dthc_get_u32(f->p + 4) - t_arrival) : 0u);
+    return 0;
+}
+
 /* Frames after expiry renew nothing; only FAULT_RESET re-arms. */
 static int test_frames_after_expiry_do_not_revive(void)
 {
@@ -828,6 +860,7 @@ static const struct {
 } TESTS[] = {
 #define T(n) {#n, test_##n}
     T(lease_expiry_within_one_tick),
+    T(lease_runs_from_the_frames_arrival),
     T(frames_after_expiry_do_not_revive),
     T(fault_rereported_every_250ms),
     T(duplicate_replayed_not_reexecuted),
