@@ -14,9 +14,7 @@ import asyncio
 import json
 import os
 import random
-import select
 import time
-import tty
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -29,6 +27,7 @@ from dthc_bridge.conformance.options import LEASE_TOLERANCE_US
 from dthc_tools.demo import Stack, StackOptions, program_lines
 from dthc_tools.emulated_board import EmulatedBoard, HarnessOptions, read_record
 from dthc_tools.emulated_board.harness import RecordEvent, relay_off_after_last_host_byte_us
+from tests.emulated_board.frame_link import FrameLink
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
@@ -166,44 +165,6 @@ async def test_a_daemon_killed_mid_cut_leaves_the_relay_on_no_longer_than_the_le
 # --- a garbage storm on the link, no daemon -----------------------------------------------
 
 
-class _Link:
-    """Frames over the board's pty: encode, write, decode what comes back."""
-
-    def __init__(self, path: Path) -> None:
-        self.fd = os.open(path, os.O_RDWR | os.O_NOCTTY)
-        tty.setraw(self.fd)
-        self.decoder = fp.StreamDecoder()
-        self.received: list[fp.Message] = []
-        self.seq = 0
-        os.write(self.fd, b"\x00")
-
-    def close(self) -> None:
-        os.close(self.fd)
-
-    def pump(self, wait_s: float) -> None:
-        ready, _, _ = select.select([self.fd], [], [], wait_s)
-        if ready:
-            self.received.extend(self.decoder.feed(os.read(self.fd, 65536)))
-
-    def request(self, make: Any, attempts: int = 5, timeout_s: float = 0.1) -> fp.Message:
-        """As the daemon asks: the same frame again after ``timeout_s``, ``attempts`` times
-        (a board whose receive buffer is full drops what does not fit)."""
-        self.seq = self.seq % 255 + 1
-        msg = make(self.seq)
-        mark = len(self.received)
-        for _ in range(attempts):
-            os.write(self.fd, fp.encode(msg))
-            deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline:
-                self.pump(0.01)
-                for reply in self.received[mark:]:
-                    if not isinstance(reply, fp.Samples | fp.Event | fp.Fault) and (
-                        getattr(reply, "seq", None) == msg.seq
-                    ):
-                        return reply
-        raise TimeoutError(f"no reply to {msg!r} in {attempts} attempts")
-
-
 @pytest.fixture
 def mega(tmp_path: Path) -> Iterator[EmulatedBoard]:
     options = HarnessOptions(record=tmp_path / "record.csv", stderr=tmp_path / "host.log")
@@ -237,10 +198,9 @@ def test_a_storm_of_garbage_neither_resets_nor_wedges_the_board(mega: EmulatedBo
     watchdog reset), keeps sending SAMPLES through the storm, counts the errors, never
     switches the relay on (garbage contains bit-flipped TORCH-on frames) and answers at once
     afterwards; the lease it lost during the storm re-arms with FAULT_RESET."""
-    link = _Link(mega.pty)
+    link = FrameLink(mega.pty)
     try:
-        hello = link.request(lambda s: fp.Hello(s, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 7))
-        assert isinstance(hello, fp.HelloInfo)
+        hello = link.hello()
         rng = random.Random(17)
         storm = garbage(rng, 64 * 1024)
         sent = 0
@@ -254,15 +214,11 @@ def test_a_storm_of_garbage_neither_resets_nor_wedges_the_board(mega: EmulatedBo
             link.pump(0.01)
         during = [m for m in link.received[mark:] if isinstance(m, fp.Samples)]
         os.write(link.fd, b"\x00")
-        again = link.request(lambda s: fp.Hello(s, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 8))
-        assert isinstance(again, fp.HelloInfo)
+        again = link.hello()
         assert again.boot_id == hello.boot_id  # not reset (no watchdog, no crash)
-        status = link.request(lambda s: fp.Query(s, fp.QueryWhat.STATUS))
-        assert isinstance(status, fp.Status)
-        reset = link.request(lambda s: fp.FaultReset(s, 0xFFFF))
-        assert isinstance(reset, fp.Ack)
-        torch = link.request(lambda s: fp.Torch(s, False))
-        assert isinstance(torch, fp.Ack)
+        status = link.status()
+        link.expect(lambda s: fp.FaultReset(s, 0xFFFF), fp.Ack)
+        link.expect(lambda s: fp.Torch(s, False), fp.Ack)
     finally:
         link.close()
     assert status.rx_crc_errors + status.rx_framing_errors > 0

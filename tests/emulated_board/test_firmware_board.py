@@ -107,13 +107,6 @@ def test_the_conformance_suite_passes_against_the_mega_firmware(
     run_conformance(board, tmp / "board.pty")
 
 
-@pytest.mark.xfail(
-    reason="firmware finding (2026-11-25): the Nano build's 256-byte receive ring overflows "
-    "under corrupt_frames' 300-byte garbage burst at 1 Mbaud line rate; the lost delimiter "
-    "merges the garbage with the next two frames, so the unknown-type frame and its "
-    "retransmission are never NAKed",
-    strict=False,
-)
 def test_the_conformance_suite_passes_against_the_nano_firmware(
     firmware_board: tuple[EmulatedBoard, Path], tmp_path: Path
 ) -> None:

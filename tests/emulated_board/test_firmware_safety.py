@@ -1,0 +1,155 @@
+"""DESIGN.md's safety promises of a board, measured on the firmware's own ELF on the emulated
+Mega 2560 at its pins (the harness's record, simulated time): E-stop and breakaway latch the
+torch relay off within one sample period and keep it off until released and reset; lease
+expiry drops the relay and stops Z; a velocity stream into the soft limit stops there and
+latches Z_LIMIT.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+import firmware_protocol as fp
+from dthc_tools.emulated_board import EmulatedBoard, HarnessOptions, read_record
+from dthc_tools.emulated_board.harness import RecordEvent, relay_off_after_last_host_byte_us
+from firmware_protocol import FaultCode, MotionResult, NakCode
+
+from .frame_link import FrameLink
+
+pytestmark = pytest.mark.slow
+
+SAMPLE_PERIOD_US = 1000
+# The board's axis (firmware/avr/pins.h): soft limit, speed limits.
+Z_MAX_UM = 100_000
+Z_ACCEL_MM_S2 = 650.0
+
+
+@pytest.fixture(scope="module")
+def board(built: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmulatedBoard]:
+    """One Mega board for the module, the torch far above the plate (a pilot only)."""
+    tmp = tmp_path_factory.mktemp("safety")
+    options = HarnessOptions(record=tmp / "record.csv", stderr=tmp / "host.log")
+    with EmulatedBoard(tmp / "board.pty", options) as emulated:
+        yield emulated
+
+
+@pytest.fixture
+def link(board: EmulatedBoard) -> Iterator[FrameLink]:
+    """A fresh session, faults cleared, a long lease; torch off and Z stopped after."""
+    link = FrameLink(board.pty)
+    link.hello()
+    link.expect(lambda s: fp.SetLease(s, 2000), fp.Ack)
+    if faults := link.status().faults:
+        link.expect(lambda s: fp.FaultReset(s, faults), fp.Ack)
+    try:
+        yield link
+    finally:
+        link.request(lambda s: fp.Torch(s, False))
+        link.request(fp.ZStop)
+        link.close()
+
+
+def record(board: EmulatedBoard) -> list[RecordEvent]:
+    assert board.options.record is not None
+    return read_record(board.options.record)
+
+
+def last_edge(events: list[RecordEvent], event: str, *fields: str) -> RecordEvent:
+    found = [e for e in events if e.event == event and e.fields[: len(fields)] == fields]
+    assert found, f"no {event} {fields} in the record"
+    return found[-1]
+
+
+@pytest.mark.parametrize(
+    ("name", "code"), [("estop", FaultCode.ESTOP), ("breakaway", FaultCode.BREAKAWAY)]
+)
+def test_estop_and_breakaway_latch_the_relay_off_within_a_sample_period(
+    board: EmulatedBoard, link: FrameLink, name: str, code: FaultCode
+) -> None:
+    """Torch on, the input goes active: the relay pin falls within one sample period of the
+    input's edge, FAULT names it, TORCH on is refused while latched, FAULT_RESET is refused
+    while the input stays active and accepted once it is released."""
+    link.expect(lambda s: fp.Torch(s, True), fp.Ack)
+    mark = len(link.received)
+    board.set_input(name, True)
+    link.run_for(0.05)
+    events = record(board)
+    edge = last_edge(events, "input", name, "1")
+    off = last_edge(events, "torch", "0")
+    assert 0 <= off.t_us - edge.t_us <= SAMPLE_PERIOD_US, (edge, off)
+    assert any(f.code == code for f in link.reports(fp.Fault, mark))
+    nak = link.expect(lambda s: fp.Torch(s, True), fp.Nak)
+    assert (nak.code, nak.detail) == (NakCode.FAULT_LATCHED, code)
+    nak = link.expect(lambda s: fp.FaultReset(s, 1 << code), fp.Nak)
+    assert (nak.code, nak.detail) == (NakCode.FAULT_ACTIVE, code)
+    assert not board.status().torch
+    board.set_input(name, None)
+    link.run_for(0.01)
+    link.expect(lambda s: fp.FaultReset(s, 1 << code), fp.Ack)
+    assert link.status().faults == 0
+    print({name: {"relay_off_after_input_us": off.t_us - edge.t_us}})
+
+
+def test_lease_expiry_drops_the_relay_and_stops_z_moving_at_its_deceleration(
+    board: EmulatedBoard, link: FrameLink
+) -> None:
+    """Torch on and Z moving up at 10 mm/s, then the host falls silent (100 ms lease): the
+    relay falls within the lease and one sample period of the last frame's arrival, the move
+    ends with MOTION_DONE FAULT, and Z comes to rest within its braking distance and holds."""
+    feed_mm_s = 10.0
+    z0 = board.status().z_um
+    link.expect(lambda s: fp.SetLease(s, 100), fp.Ack)
+    link.expect(lambda s: fp.Torch(s, True), fp.Ack)
+    mark = len(link.received)
+    link.expect(lambda s: fp.ZMove(s, z0 + 30_000, round(feed_mm_s * 1000)), fp.Ack)
+    link.run_for(0.6)  # silence: the lease runs out mid-move
+    events = record(board)
+    off = last_edge(events, "torch", "0")
+    after_us = relay_off_after_last_host_byte_us(events)
+    assert after_us is not None
+    assert 100_000 <= after_us <= 100_000 + SAMPLE_PERIOD_US + 250, after_us
+    done = link.reports(fp.MotionDone, mark)
+    assert [d.result for d in done] == [MotionResult.FAULT]
+    z = [
+        (e.t_us, int(e.fields[0])) for e in events if e.event == "z" and e.t_us >= off.t_us - 10_000
+    ]
+    z_at_off, z_rest = z[0][1], z[-1][1]
+    braking_um = 1000 * feed_mm_s**2 / (2 * Z_ACCEL_MM_S2)  # 77 um
+    # The record's Z is every 10 ms: at most 10 ms of travel before the edge, plus braking.
+    assert 0 <= z_rest - z_at_off <= braking_um + feed_mm_s * 10 + 10, (z_at_off, z_rest)
+    resting = [t for t, um in z if um == z_rest]
+    assert resting[0] - off.t_us <= 40_000  # at rest 40 ms after the relay fell at the latest
+    assert z[-1][0] - resting[0] >= 300_000  # and held there
+    assert z_rest - z0 < 30_000  # the move was abandoned
+    print({"lease_100ms": {"relay_off_after_last_frame_us": after_us,
+                           "z_after_relay_off_um": z_rest - z_at_off,
+                           "at_rest_after_us": resting[0] - off.t_us}})  # fmt: skip
+
+
+def test_a_velocity_stream_into_the_soft_limit_stops_there_and_latches_z_limit(
+    board: EmulatedBoard, link: FrameLink
+) -> None:
+    """Z a millimetre below its top soft limit, a Z_VELOCITY stream upwards: Z stops at the
+    limit (never past it, counted from the STEP pulses) and the board latches Z_LIMIT (max);
+    FAULT_RESET clears it there, and Z can leave downwards."""
+    link.expect(lambda s: fp.ZMove(s, Z_MAX_UM - 1000, 50_000), fp.Ack)
+    link.run_for(1.0)
+    assert board.status().z_um == Z_MAX_UM - 1000
+    mark = len(link.received)
+    for stream_seq in range(1, 9):
+        link.send(fp.ZVelocity(0, stream_seq, 10_000, 100))
+        link.run_for(0.05)
+    link.run_for(0.1)
+    z_max = max(int(e.fields[0]) for e in record(board) if e.event == "z")
+    assert z_max <= Z_MAX_UM
+    assert board.status().z_um >= Z_MAX_UM - 50  # it got there
+    limit = [f for f in link.reports(fp.Fault, mark) if f.code == FaultCode.Z_LIMIT]
+    assert limit
+    assert limit[0].detail == 1  # the max side
+    link.expect(lambda s: fp.FaultReset(s, 1 << FaultCode.Z_LIMIT), fp.Ack)
+    link.expect(lambda s: fp.ZMove(s, 60_000, 50_000), fp.Ack)
+    link.run_for(1.0)
+    assert board.status().z_um == 60_000
