@@ -249,11 +249,35 @@ int dthc_cobs_decode(const uint8_t *in, size_t len, uint8_t *out, size_t cap, si
 
 /* --- one-pass frame encoder ---------------------------------------------------------------- */
 
-/* The COBS writer above inlined with its state in locals: this runs for every reply a board
- * sends, and the call per byte cost a third of the time on AVR. The bytes are the same (the
- * tests compare it with the `cobs` package through the golden vectors). */
-size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
-                         uint8_t *out, size_t cap)
+/* The COBS writer above inlined with its state in pointers: this runs for every reply a
+ * board sends. The bytes are the same (the tests compare it with the `cobs` package through
+ * the golden vectors). A body byte b: a zero closes the open block (its code byte goes where
+ * the block began), anything else is copied; 254 data bytes close a block too (code 0xFF,
+ * no zero implied). */
+#define DTHC_COBS_PUT(b)                                                                     \
+    do {                                                                                     \
+        uint8_t b_ = (b);                                                                    \
+        if (b_ == 0) {                                                                       \
+            *code_p = code;                                                                  \
+            code_p = dst++;                                                                  \
+            code = 1;                                                                        \
+        } else {                                                                             \
+            *dst++ = b_;                                                                     \
+            if (++code == 0xFF) {                                                            \
+                *code_p = 0xFF;                                                              \
+                code_p = dst++;                                                              \
+                code = 1;                                                                    \
+            }                                                                                \
+        }                                                                                    \
+    } while (0)
+
+/* The wire length can exceed this for no body: one code byte per started 254-byte block,
+ * the delimiter. With cap at least this, the loop checks no bounds. */
+#define DTHC_WIRE_BOUND(total) ((total) + (total) / 254u + 2u)
+
+/* The checked path, for a cap below the bound (a caller probing the exact size). */
+static size_t encode_frame_checked(uint8_t type, uint8_t seq, const uint8_t *payload,
+                                   size_t len, uint8_t *out, size_t cap)
 {
     uint16_t crc = DTHC_CRC_INIT;
     size_t total = len + 4; /* type, seq, payload, crc */
@@ -262,17 +286,12 @@ size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size
     size_t code_pos = 0; /* where the code byte of the open block goes */
     uint8_t code = 1;    /* 1 + data bytes in the open block */
     bool fresh = false;  /* the open block was opened by a full 254-byte block, not a zero */
-    if (out == NULL || len > DTHC_MAX_PAYLOAD || (payload == NULL && len != 0) || cap == 0) {
-        return 0;
-    }
     for (k = 0; k < total; k++) {
         uint8_t b;
         if (k < 2) {
             b = k == 0 ? type : seq;
             crc = DTHC_CRC_STEP(crc, b);
         } else if (k < len + 2) {
-            /* Read before any write can reach it when the payload lies in `out` at
-             * DTHC_TX_PAYLOAD_OFFSET or later: writes so far stay below index k + 1. */
             b = payload[k - 2];
             crc = DTHC_CRC_STEP(crc, b);
         } else {
@@ -307,6 +326,113 @@ size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size
     }
     out[pos] = DTHC_DELIMITER;
     return pos + 1;
+}
+
+size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
+                         uint8_t *out, size_t cap)
+{
+    uint16_t crc = DTHC_CRC_INIT;
+    uint8_t *code_p = out; /* where the code byte of the open block goes */
+    uint8_t *dst = out + 1;
+    uint8_t code = 1; /* 1 + data bytes in the open block */
+    const uint8_t *src = payload;
+    const uint8_t *end;
+    uint8_t lo;
+    if (out == NULL || len > DTHC_MAX_PAYLOAD || (payload == NULL && len != 0) || cap == 0) {
+        return 0;
+    }
+    if (cap < DTHC_WIRE_BOUND(len + 4)) {
+        return encode_frame_checked(type, seq, payload, len, out, cap);
+    }
+    end = src + len;
+    crc = DTHC_CRC_STEP(crc, type);
+    DTHC_COBS_PUT(type);
+    crc = DTHC_CRC_STEP(crc, seq);
+    DTHC_COBS_PUT(seq);
+    /* In place (payload in `out` at DTHC_TX_PAYLOAD_OFFSET or later): each byte is read
+     * before any write reaches it, the writes stay below src + 1. */
+    while (src != end) {
+        uint8_t b = *src++;
+        crc = DTHC_CRC_STEP(crc, b);
+        DTHC_COBS_PUT(b);
+    }
+    DTHC_COBS_PUT((uint8_t)(crc >> 8)); /* the CRC is big-endian */
+    lo = (uint8_t)(crc & 0xFFu);
+    DTHC_COBS_PUT(lo);
+    if (code == 1 && lo != 0) {
+        dst--; /* a full block ended the frame: no empty one after it */
+    } else {
+        *code_p = code;
+    }
+    *dst++ = DTHC_DELIMITER;
+    return (size_t)(dst - out);
+}
+
+/* --- streaming frame encoder ----------------------------------------------------------------- */
+
+size_t dthc_frame_seal(uint8_t type, uint8_t seq, uint8_t *buf, size_t len)
+{
+    uint16_t crc = DTHC_CRC_INIT;
+    uint8_t *p = buf + 1;
+    uint8_t *end;
+    size_t total = len + 4;
+    size_t wire = total + 2; /* a code byte, the delimiter: exact up to 254 body bytes */
+    if (len > DTHC_MAX_PAYLOAD) {
+        return 0;
+    }
+    buf[1] = type;
+    buf[2] = seq;
+    end = p + 2 + len;
+    while (p != end) {
+        crc = DTHC_CRC_STEP(crc, *p);
+        p++;
+    }
+    p[0] = (uint8_t)(crc >> 8);
+    p[1] = (uint8_t)(crc & 0xFFu);
+    if (total > 254) { /* a run of 254 non-zero bytes before the end costs a code byte */
+        size_t run = 0;
+        size_t k;
+        for (k = 0; k < total; k++) {
+            if (!buf[1 + k]) {
+                run = 0;
+            } else if (++run == 254 && k + 1 < total) {
+                wire++;
+                run = 0;
+            }
+        }
+    }
+    return wire;
+}
+
+void dthc_frame_stream(const uint8_t *buf, size_t len, dthc_sink_fn sink)
+{
+    uint8_t delimiter = DTHC_DELIMITER; /* not static: that would sit in RAM on AVR */
+    const uint8_t *p = buf + 1;
+    size_t left = len + 4;
+    for (;;) {
+        uint8_t run = 0;
+        uint8_t code;
+        size_t lim = left < 254 ? left : 254;
+        while (run < lim && p[run]) {
+            run++;
+        }
+        code = (uint8_t)(run + 1);
+        sink(&code, 1);
+        if (run) {
+            sink(p, run);
+        }
+        if (run == left) {
+            break; /* the body ended (a full block at the very end: no empty one after) */
+        }
+        if (run == 254) {
+            p += 254; /* a full block: no zero implied */
+            left -= 254;
+        } else {
+            p += run + 1; /* the zero this block's code stands for */
+            left -= (size_t)run + 1u;
+        }
+    }
+    sink(&delimiter, 1);
 }
 
 /* --- field serialisation ------------------------------------------------------------------

@@ -462,6 +462,20 @@ uint16_t dthc_crc16_update(uint16_t crc, uint8_t byte);
 size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size_t len,
                          uint8_t *out, size_t cap);
 
+/* Streaming (a board that feeds its UART's transmit ring while it encodes, so the first
+ * byte leaves before the last is made):
+ *   n = dthc_frame_seal(type, seq, buf, len);   payload at buf + DTHC_TX_PAYLOAD_OFFSET
+ *   reserve n bytes of the ring (all or nothing), then
+ *   dthc_frame_stream(buf, len, sink);          sink gets exactly those n bytes, in order
+ * dthc_frame_seal puts type and seq in front of the payload (buf[1], buf[2]) and the CRC
+ * behind it (buf needs len + DTHC_TX_PAYLOAD_OFFSET + 2 bytes), and returns the exact wire
+ * length, delimiter included (0 when len > DTHC_MAX_PAYLOAD). dthc_frame_stream hands a
+ * sealed frame's wire bytes to `sink` a COBS block at a time (a code byte, then its data
+ * bytes, then the delimiter): the same bytes as dthc_encode_frame. */
+typedef void (*dthc_sink_fn)(const uint8_t *bytes, uint8_t n);
+size_t dthc_frame_seal(uint8_t type, uint8_t seq, uint8_t *buf, size_t len);
+void dthc_frame_stream(const uint8_t *buf, size_t len, dthc_sink_fn sink);
+
 /* Payload size of a message type: the fixed size, for SAMPLES the fixed part
  * (DTHC_SAMPLES_HEADER_SIZE, plus 2 per sample), or -1 for an unknown type. */
 int dthc_payload_size(uint8_t type);

@@ -30,7 +30,9 @@
  *   R <hex>   a stream through the old dthc_rx_feed_byte: "MSG ..." per message, "ERR <code>
  *             reject_type=.. reject_seq=.." per dropped frame, then a STATS line.
  *   P <hex>   type, seq, payload for dthc_encode_frame: "WIRE <hex>" and "INPLACE <hex>"
- *             (payload at DTHC_TX_PAYLOAD_OFFSET of the output buffer), then "CAP <n>": the
+ *             (payload at DTHC_TX_PAYLOAD_OFFSET of the output buffer), "STREAM <n> <hex>"
+ *             (dthc_frame_seal's wire length, the bytes dthc_frame_stream gave its sink),
+ *             then "CAP <n>": the
  *             smallest cap that works, checking that every smaller cap returns 0 and every
  *             larger one the same bytes, and that nothing is written past the cap or the
  *             frame ("CAP BAD <cap>" otherwise). Or "ERR TOO_LONG".
@@ -548,6 +550,16 @@ static void cmd_old_stream(size_t n)
     print_stats(&rx);
 }
 
+static uint8_t g_sink[2 * DTHC_MAX_WIRE_FRAME];
+static size_t g_sink_len;
+
+static void sink_collect(const uint8_t *bytes, uint8_t n)
+{
+    while (n-- && g_sink_len < sizeof g_sink) {
+        g_sink[g_sink_len++] = *bytes++;
+    }
+}
+
 static void cmd_encode_frame(size_t n)
 {
     static uint8_t wire[DTHC_MAX_WIRE_FRAME + 8];
@@ -575,6 +587,16 @@ static void cmd_encode_frame(size_t n)
     printf("INPLACE ");
     print_hex(other, dthc_encode_frame(g_line[0], g_line[1], other + DTHC_TX_PAYLOAD_OFFSET,
                                        plen, other, sizeof other));
+    printf("\n");
+
+    /* Streamed: sealed in a buffer, the blocks collected from the sink. */
+    memset(other, 0xEE, sizeof other);
+    memcpy(other + DTHC_TX_PAYLOAD_OFFSET, payload, plen);
+    g_sink_len = 0;
+    cap = dthc_frame_seal(g_line[0], g_line[1], other, plen);
+    dthc_frame_stream(other, plen, sink_collect);
+    printf("STREAM %u ", (unsigned)cap);
+    print_hex(g_sink, g_sink_len);
     printf("\n");
 
     for (cap = 0; cap < sizeof other; cap++) {

@@ -599,15 +599,17 @@ def test_golden_frame_through_frame_view(
 
 def test_golden_bodies_encode_in_one_pass(c_tool: CTool) -> None:
     """dthc_encode_frame(type, seq, payload) gives every golden wire frame, from a separate
-    payload and in place at DTHC_TX_PAYLOAD_OFFSET; a smaller cap returns 0 and writes
-    nothing past it."""
+    payload and in place at DTHC_TX_PAYLOAD_OFFSET, and so do dthc_frame_seal (its exact
+    wire length) and dthc_frame_stream; a smaller cap returns 0 and writes nothing past
+    it."""
     lines = c_tool.run(f"P {f['body_hex']}" for f in FRAMES)
-    assert len(lines) == 3 * len(FRAMES), lines[:6]
+    assert len(lines) == 4 * len(FRAMES), lines[:8]
     for i, f in enumerate(FRAMES):
         wire = f["frame_hex"]
-        assert lines[3 * i : 3 * i + 3] == [
+        assert lines[4 * i : 4 * i + 4] == [
             f"WIRE {wire}",
             f"INPLACE {wire}",
+            f"STREAM {len(wire) // 2} {wire}",
             f"CAP {len(wire) // 2}",
         ], f["name"]
 
@@ -623,7 +625,7 @@ def test_golden_bodies_encode_in_one_pass(c_tool: CTool) -> None:
 @example([(0x83, 0, bytes(252)), (0x80, 7, b"\xff" * 252), (1, 1, b""), (2, 0, bytes(253))])
 def test_encode_frame_matches_python(c_tool: CTool, frames: list[tuple[int, int, bytes]]) -> None:
     """Any type, seq and payload of up to 252 bytes encodes as the Python codec does (also in
-    place, and with the smallest cap); a longer payload is refused with 0."""
+    place, streamed, and with the smallest cap); a longer payload is refused with 0."""
     bodies = [bytes((t, q)) + payload for t, q, payload in frames]
     lines = iter(c_tool.run(f"P {b.hex()}" for b in bodies))
     for body in bodies:
@@ -631,9 +633,10 @@ def test_encode_frame_matches_python(c_tool: CTool, frames: list[tuple[int, int,
             assert next(lines) == "ERR TOO_LONG"
             continue
         wire = fp.encode_frame(body)
-        assert [next(lines) for _ in range(3)] == [
+        assert [next(lines) for _ in range(4)] == [
             f"WIRE {wire.hex()}",
             f"INPLACE {wire.hex()}",
+            f"STREAM {len(wire)} {wire.hex()}",
             f"CAP {len(wire)}",
         ]
     assert next(lines, None) is None
@@ -656,9 +659,10 @@ def test_encode_frame_at_cobs_block_edges(c_tool: CTool) -> None:
     lines = iter(c_tool.run(f"P {b.hex()}" for b in bodies))
     for body in bodies:
         wire = fp.encode_frame(body)
-        assert [next(lines) for _ in range(3)] == [
+        assert [next(lines) for _ in range(4)] == [
             f"WIRE {wire.hex()}",
             f"INPLACE {wire.hex()}",
+            f"STREAM {len(wire)} {wire.hex()}",
             f"CAP {len(wire)}",
         ], body.hex()
 
