@@ -16,7 +16,9 @@ about the open controllers (docs/plasma-facts.md):
   Z while the XY speed changes. Once the speed has held steady below the lock threshold
   and the voltage rise of the slower cut has settled (two consecutive windows of the
   filtered voltage agree), the voltage measured then (never below the cut target: slowing
-  down only raises it) becomes a temporary target, and the loop follows the plate again,
+  down only raises it; plus what the plate moved under the held torch, extrapolated from
+  the Z speed that followed it at full feed over the distance cut while held) becomes a
+  temporary target, and the loop follows the plate again,
   with its Z travel while following summed over the cut and bounded: ``slow_follow_max_mm``
   each way, and down no more than half the cut height (set by the sequence). A change of
   speed or a stale speed drops back to the plain lock, a void pauses it; at speed again,
@@ -77,6 +79,9 @@ class ThcConfig:
     slow_max_rise_v: float = 15.0  # a larger rise is no slow-down: stay locked
     slow_error_average_s: float = 0.1  # time constant of the full-speed error carried over
     slow_follow_max_mm: float = 1.5  # Z travel while following slow-downs, each way, per cut
+    # The plate keeps moving under the held torch until the slow target is measured: add the
+    # Z speed that followed it at full feed, times the time held (this fraction of it).
+    slow_plate_feedforward: float = 1.0
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -111,6 +116,10 @@ class _State:
     # The filtered voltage error (V - target) while last at full speed and unlocked: how
     # far off the torch already was when the slow-down began.
     at_speed_error_v: float = 0.0
+    at_speed_velocity_mm_s: float = 0.0  # Z speed at full feed, averaged the same way
+    # Since the velocity lock last engaged: the time held weighted by the speed ratio (the
+    # distance cut, in seconds at full feed). None: not locked from full speed.
+    held_feed_s: float | None = None
     full_speed_integral_mm_s: float = 0.0  # the integral to restore at speed
     slow_travel_mm: float = 0.0  # Z travel while following, summed over the cut
 
@@ -157,10 +166,13 @@ class ThcController:
         self, xy_speed_mm_s: float | None, requested_mm_s: float | None, now_s: float
     ) -> None:
         """Velocity anti-dive with hysteresis; unknown speed locks."""
+        cfg = self.config
         s = self._s
         if xy_speed_mm_s is None or not requested_mm_s:
             s.velocity_locked = True
             return
+        if s.held_feed_s is not None and s.velocity_locked:
+            s.held_feed_s += s.speed_ratio * min(now_s - s.last_speed_s, cfg.speed_stale_s)
         s.last_speed_s = now_s
         ratio = 100.0 * xy_speed_mm_s / requested_mm_s
         s.speed_ratio = min(1.0, max(0.0, ratio / 100.0))
@@ -181,6 +193,7 @@ class ThcController:
         elif ratio < self.anti_dive_percent:
             s.velocity_locked = True
             s.at_speed_since = None
+            s.held_feed_s = 0.0
 
     def locks(self, now_s: float) -> frozenset[Lock]:
         s = self._s
@@ -253,6 +266,7 @@ class ThcController:
             # Averaged over about 0.1 s: one noisy sample must not set the next slow target.
             a = min(1.0, dt_s / cfg.slow_error_average_s)
             s.at_speed_error_v += a * (v_f - self.target_v - s.at_speed_error_v)
+            s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
             error_v = target_v - v_f  # positive: voltage low, torch too close
             if abs(error_v) <= cfg.deadband_v:
@@ -349,7 +363,12 @@ class ThcController:
         # Slowing down only raises the voltage: a measured value below the cut target
         # means the torch is already low, and the cut target is the safe one. The error
         # the torch already had at full speed is not kept.
-        s.slow_target_v = max(measured - s.at_speed_error_v, self.target_v)
+        # A plate that rose under the held torch lowered the voltage measured: add it back.
+        held_s = 0.0 if s.held_feed_s is None else s.held_feed_s
+        plate_v = (
+            cfg.slow_plate_feedforward * s.at_speed_velocity_mm_s * held_s * cfg.slope_v_per_mm
+        )
+        s.slow_target_v = max(measured - s.at_speed_error_v + plate_v, self.target_v)
         s.full_speed_integral_mm_s = s.integral_mm_s
         # The integral is the Z speed that followed the plate at full feed: scale it.
         s.integral_mm_s *= s.speed_ratio

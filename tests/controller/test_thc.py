@@ -425,3 +425,30 @@ def test_following_a_velocity_reduction_holds_height_on_a_warped_sheet() -> None
     assert isinstance(followed["rms_mm"], float)
     assert followed["rms_mm"] < 0.7 * held["rms_mm"]
     assert followed["max_mm"] < 0.6 * held["max_mm"]
+
+
+def _rising_plate_slow_down(**cfg: Any) -> float:
+    """A plate rising 2 mm/s at full feed (1 mm/s at half feed: it rises with the distance
+    cut) under a torch the loop follows; then a half-speed slow-down whose settled rise is
+    5 V. Returns the slow target measured."""
+    thc = running(**cfg)
+    z = plate = t = 0.0
+    dt = 0.005
+    for i in range(600):
+        speed = 100.0 if i < 400 else 50.0
+        plate += 2.0 * speed / 100.0 * dt
+        volts = 120.0 + 7.5 * (z - plate) + (5.0 if speed < 100.0 else 0.0)
+        t += dt
+        z += step(thc, volts, t, speed=speed) * dt
+        if thc.slow_target_v is not None:
+            return thc.slow_target_v
+    raise AssertionError("the slow-down was never followed")
+
+
+def test_the_plate_moving_under_the_held_torch_is_added_to_the_slow_target() -> None:
+    """While the velocity lock holds Z and the rise settles, a plate that kept rising lowered
+    the voltage measured: the Z speed that followed it at full feed, times the distance cut
+    while held, puts that back, so the slow target is the 5 V rise, not less."""
+    assert _rising_plate_slow_down() == pytest.approx(125.0, abs=0.4)
+    # Without it the target is short by the plate's rise while held (about 0.15 mm).
+    assert _rising_plate_slow_down(slow_plate_feedforward=0.0) < 124.2
