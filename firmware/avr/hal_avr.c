@@ -50,13 +50,15 @@
 #endif
 typedef char hal_rx_ring_pow2[(HAL_RX_RING & (HAL_RX_RING - 1)) == 0 ? 1 : -1];
 typedef char hal_tx_ring_pow2[(HAL_TX_RING & (HAL_TX_RING - 1)) == 0 ? 1 : -1];
+typedef char hal_tx_ring_8bit[HAL_TX_RING <= 256 ? 1 : -1]; /* 8-bit indices */
+#define TX_MASK ((uint8_t)(HAL_TX_RING - 1u))
 
 static uint8_t rx_ring[HAL_RX_RING];
 static volatile uint16_t rx_head; /* written by the RX interrupt */
 static uint16_t rx_tail;          /* written by the main loop */
 static uint8_t tx_ring[HAL_TX_RING];
-static uint16_t tx_head;          /* written by the producers (tick, locked main loop) */
-static volatile uint16_t tx_tail; /* written by the UDRE interrupt */
+static volatile uint8_t tx_head; /* written by the producers (tick, locked main loop) */
+static volatile uint8_t tx_tail; /* written by the UDRE interrupt */
 volatile uint16_t hal_rx_overruns;
 
 /* Arrival times of the delimiters in the receive ring, in order (the lease runs from a
@@ -94,13 +96,13 @@ ISR(UART_RX_vect)
 
 ISR(UART_UDRE_vect)
 {
-    uint16_t t = tx_tail;
+    uint8_t t = tx_tail;
     if (t == tx_head) {
         UCSR0B &= (uint8_t)~_BV(UDRIE0);
         return;
     }
     UDR0 = tx_ring[t];
-    tx_tail = (uint16_t)((t + 1u) & (HAL_TX_RING - 1u));
+    tx_tail = (uint8_t)((t + 1u) & TX_MASK);
 }
 
 int16_t hal_uart_getc(void)
@@ -142,26 +144,22 @@ bool hal_uart_rx_pending(void)
 
 uint16_t hal_uart_tx_free(void)
 {
-    uint16_t tail;
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { tail = tx_tail; }
-    return (uint16_t)((tail - tx_head - 1u) & (HAL_TX_RING - 1u));
+    return (uint8_t)((tx_tail - tx_head - 1u) & TX_MASK); /* tx_tail: one byte, atomic */
 }
 
 bool hal_uart_write(const uint8_t *data, uint16_t n)
 {
-    uint16_t h = tx_head;
+    uint8_t h;
     if (n > hal_uart_tx_free()) {
         return false;
     }
+    h = tx_head;
     while (n--) {
         tx_ring[h] = *data++;
-        h = (uint16_t)((h + 1u) & (HAL_TX_RING - 1u));
+        h = (uint8_t)((h + 1u) & TX_MASK);
     }
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-    {
-        tx_head = h;
-        UCSR0B |= _BV(UDRIE0);
-    }
+    tx_head = h; /* one byte: the UDRE interrupt sees all of the frame or none */
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
     return true;
 }
 

@@ -5,8 +5,8 @@
  * A command runs with the tick locked (it changes what the tick reads), and its ACK or
  * NAK is queued before the lock is released, so a report the command causes (a
  * MOTION_DONE, a PROBE_RESULT) always follows the command's reply on the wire. Query
- * replies are snapshotted under the lock and encoded after it: a long encode never holds
- * up the tick.
+ * replies are snapshotted under the lock and encoded after it: encoding never holds up
+ * the tick.
  */
 #include "board_internal.h"
 
@@ -151,19 +151,13 @@ static uint8_t status(void)
     return 35;
 }
 
-/* Encode a query reply outside the lock, queue it inside (dropped if the ring stays full:
- * the host asks again). */
+/* Encode and queue a query reply (snapshotted under the lock) with the tick running
+ * (dropped if the ring stays full: the host asks again). */
 static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
 {
-    size_t n;
-    uint16_t spins = 0;
     hal_tick_unlock();
-    n = dthc_encode_frame(type, seq, QUERY_AT, len, query_tx, sizeof query_tx);
-    while (hal_uart_tx_free() < n && ++spins) {
-        /* the transmit interrupt drains the ring; the tick keeps running */
-    }
+    (void)board_send_frame(type, seq, query_tx, len);
     hal_tick_lock();
-    (void)hal_uart_write(query_tx, (uint16_t)n);
 #ifdef BOARD_TIMING
     if (type == DTHC_MSG_STATUS) {
         status_encode_us = (uint16_t)(hal_time_us() - frame_done_us);
@@ -402,6 +396,30 @@ static void frame(const dthc_frame_t *f)
     command(f->type, f->seq, f->payload);
 }
 
+/* A short frame is arriving (a QUERY is 7 bytes, 70 us on the wire at 1 Mbaud): a batch
+ * queued now would go out ahead of its reply (35 bytes, 0.35 ms of wire). Hold the batch
+ * back until the frame is complete, for at most BATCH_HOLD_US (a frame that never ends
+ * does not stop the samples). */
+#define BATCH_HOLD_FRAME_BYTES 32
+#define BATCH_HOLD_US 300u
+static bool batch_holding;
+static uint32_t batch_hold_since_us;
+
+static bool batch_waits_for_frame(void)
+{
+    uint32_t now;
+    if (board_rx.enc_len == 0 || board_rx.enc_len > BATCH_HOLD_FRAME_BYTES) {
+        batch_holding = false;
+        return false;
+    }
+    now = hal_time_us();
+    if (!batch_holding) {
+        batch_holding = true;
+        batch_hold_since_us = now;
+    }
+    return (uint32_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
+}
+
 bool board_poll(void)
 {
     uint8_t budget = POLL_BYTES_MAX;
@@ -443,5 +461,5 @@ bool board_poll(void)
         }
     }
     /* Replies first: a batch waiting here is not time-critical, a reply is (1 ms). */
-    return board_flush_samples() || did;
+    return board_flush_samples(batch_waits_for_frame()) || did;
 }

@@ -18,10 +18,10 @@
 /* Reports built under the tick lock (or in the tick) go through this small buffer. */
 #define BOARD_SMALL_PAYLOAD 16 /* EVENT and FAULT, the largest report */
 #define BOARD_SMALL_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_SMALL_PAYLOAD + 6)
-/* SAMPLES, encoded in place where the samples were collected. */
+/* SAMPLES, encoded in place where the samples were collected (dthc_encode_in_place). */
 #define BOARD_SAMPLES_PAYLOAD (DTHC_SAMPLES_HEADER_SIZE + 2 * BOARD_MAX_BATCH)
 #define BOARD_SAMPLES_TX (BOARD_SAMPLES_PAYLOAD + 4 + 2 + 1 + 1)
-/* Query replies (HELLO_INFO is the largest), encoded outside the lock. */
+/* Query replies (HELLO_INFO is the largest), encoded in place outside the lock. */
 #define BOARD_QUERY_PAYLOAD 45
 #define BOARD_QUERY_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_QUERY_PAYLOAD + 6)
 
@@ -136,7 +136,9 @@ void board_set_torch(bool on);
 void board_set_ohmic(bool on);
 bool board_configure(const uint8_t *p, uint8_t *bad_field);
 void board_send_small(uint8_t type, uint8_t seq, uint8_t len);
-bool board_flush_samples(void);
+bool board_flush_samples(bool hold);
+bool board_queue(const uint8_t *wire, size_t n);
+bool board_send_frame(uint8_t type, uint8_t seq, uint8_t *buf, uint8_t len);
 extern uint8_t board_small_tx[BOARD_SMALL_TX];
 #define BOARD_SMALL_PAYLOAD_AT (board_small_tx + DTHC_TX_PAYLOAD_OFFSET)
 

@@ -32,6 +32,8 @@
  *   P <hex>   type, seq, payload for dthc_encode_frame: "WIRE <hex>" and "INPLACE <hex>"
  *             (payload at DTHC_TX_PAYLOAD_OFFSET of the output buffer), "STREAM <n> <hex>"
  *             (dthc_frame_seal's wire length, the bytes dthc_frame_stream gave its sink),
+ *             "SEALED <hex>" (dthc_encode_in_place; " WROTE PAST <i>" if it wrote beyond
+ *             len + DTHC_TX_PAYLOAD_OFFSET + 4 bytes),
  *             then "CAP <n>": the
  *             smallest cap that works, checking that every smaller cap returns 0 and every
  *             larger one the same bytes, and that nothing is written past the cap or the
@@ -597,6 +599,19 @@ static void cmd_encode_frame(size_t n)
     dthc_frame_stream(other, plen, sink_collect);
     printf("STREAM %u ", (unsigned)cap);
     print_hex(g_sink, g_sink_len);
+    printf("\n");
+
+    memset(other, 0xEE, sizeof other);
+    memcpy(other + DTHC_TX_PAYLOAD_OFFSET, payload, plen);
+    cap = dthc_encode_in_place(g_line[0], g_line[1], other, plen);
+    printf("SEALED ");
+    print_hex(other, cap);
+    for (k = cap; k < sizeof other; k++) {
+        if (other[k] != 0xEE && k >= plen + DTHC_TX_PAYLOAD_OFFSET + 4) {
+            printf(" WROTE PAST %u", (unsigned)k);
+            break;
+        }
+    }
     printf("\n");
 
     for (cap = 0; cap < sizeof other; cap++) {

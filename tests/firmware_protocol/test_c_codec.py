@@ -600,16 +600,17 @@ def test_golden_frame_through_frame_view(
 def test_golden_bodies_encode_in_one_pass(c_tool: CTool) -> None:
     """dthc_encode_frame(type, seq, payload) gives every golden wire frame, from a separate
     payload and in place at DTHC_TX_PAYLOAD_OFFSET, and so do dthc_frame_seal (its exact
-    wire length) and dthc_frame_stream; a smaller cap returns 0 and writes nothing past
+    wire length) with dthc_frame_stream, and dthc_encode_in_place; a smaller cap returns 0 and writes nothing past
     it."""
     lines = c_tool.run(f"P {f['body_hex']}" for f in FRAMES)
-    assert len(lines) == 4 * len(FRAMES), lines[:8]
+    assert len(lines) == 5 * len(FRAMES), lines[:10]
     for i, f in enumerate(FRAMES):
         wire = f["frame_hex"]
-        assert lines[4 * i : 4 * i + 4] == [
+        assert lines[5 * i : 5 * i + 5] == [
             f"WIRE {wire}",
             f"INPLACE {wire}",
             f"STREAM {len(wire) // 2} {wire}",
+            f"SEALED {wire}",
             f"CAP {len(wire) // 2}",
         ], f["name"]
 
@@ -633,10 +634,11 @@ def test_encode_frame_matches_python(c_tool: CTool, frames: list[tuple[int, int,
             assert next(lines) == "ERR TOO_LONG"
             continue
         wire = fp.encode_frame(body)
-        assert [next(lines) for _ in range(4)] == [
+        assert [next(lines) for _ in range(5)] == [
             f"WIRE {wire.hex()}",
             f"INPLACE {wire.hex()}",
             f"STREAM {len(wire)} {wire.hex()}",
+            f"SEALED {wire.hex()}",
             f"CAP {len(wire)}",
         ]
     assert next(lines, None) is None
@@ -659,10 +661,11 @@ def test_encode_frame_at_cobs_block_edges(c_tool: CTool) -> None:
     lines = iter(c_tool.run(f"P {b.hex()}" for b in bodies))
     for body in bodies:
         wire = fp.encode_frame(body)
-        assert [next(lines) for _ in range(4)] == [
+        assert [next(lines) for _ in range(5)] == [
             f"WIRE {wire.hex()}",
             f"INPLACE {wire.hex()}",
             f"STREAM {len(wire)} {wire.hex()}",
+            f"SEALED {wire.hex()}",
             f"CAP {len(wire)}",
         ], body.hex()
 
