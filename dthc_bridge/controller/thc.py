@@ -12,6 +12,11 @@ about the open controllers (docs/plasma-facts.md):
 - **Hunting**: the command is limited in speed (M667 F) and in acceleration.
 - **Corner dive**: velocity anti-dive locks below A % of the requested feed and unlocks
   only above 99 %; missing or stale XY speed counts as locked.
+- **Back at speed**: the velocity lock holds ``anti_dive_unlock_hold_s`` longer while the
+  slow-down's voltage rise decays; meanwhile the loop acts (P only) on the voltage less an
+  estimate of the rise left (its excess at the hold's start, decaying exponentially), down
+  only on what remains, up only on a voltage low by itself: a plate falling away after a
+  corner is followed, the decaying rise is not.
 - **Long slow-downs** (a velocity reduction, a slow lead or hole): the velocity lock holds
   Z while the XY speed changes. Once the speed has held steady below the lock threshold
   and the voltage rise of the slower cut has settled (two consecutive windows of the
@@ -67,6 +72,10 @@ class ThcConfig:
     # After the machine is back at speed the arc still carries the slow-down's voltage rise
     # for some tens of ms: stay locked that much longer.
     anti_dive_unlock_hold_s: float = 0.1
+    # During that hold the loop acts (P only) on the voltage less what is left of the rise:
+    # the excess over the voltage at full speed when the hold began, decaying with this time
+    # constant. 0: Z holds to the end of the hold.
+    unlock_hold_rise_tau_s: float = 0.08
     # Steady slow-downs: follow the plate against the voltage measured once the rise has
     # settled (see the module docstring). Off: the velocity lock holds Z to the end.
     slow_follow: bool = True
@@ -103,6 +112,7 @@ class _State:
     velocity_mm_s: float = 0.0
     velocity_locked: bool = True
     at_speed_since: float | None = None
+    hold_rise_v: float | None = None  # the rise left when the unlock hold began
     void_until_s: float = -1.0
     steep_samples: int = 0
     next_sample_t: float | None = None
@@ -125,6 +135,7 @@ class _State:
 
 
 _DELAY_ONLY = frozenset({Lock.FROZEN})
+_VELOCITY_ONLY = frozenset({Lock.VELOCITY})
 
 
 class ThcController:
@@ -188,6 +199,7 @@ class ThcController:
             else:
                 if s.at_speed_since is None:
                     s.at_speed_since = now_s
+                    s.hold_rise_v = None
                 if now_s - s.at_speed_since >= self.config.anti_dive_unlock_hold_s:
                     s.velocity_locked = False
         elif ratio < self.anti_dive_percent:
@@ -281,6 +293,8 @@ class ThcController:
                 command = cfg.kp_per_s * error_mm + s.integral_mm_s
             elif self.rise_only and locks == _DELAY_ONLY and error_mm > 0.0:
                 command = cfg.kp_per_s * error_mm  # up only, and no integral yet
+            elif locks == _VELOCITY_ONLY and s.at_speed_since is not None:
+                command = self._unlock_hold_command(v_f, target_v, now_s)
         limit = self.max_speed_mm_s
         command = max(-limit, min(limit, command))
         if s.slow_target_v is not None:
@@ -303,6 +317,29 @@ class ThcController:
         if s.slow_target_v is not None:
             s.slow_travel_mm += s.velocity_mm_s * dt_s
         return ThcOutput(s.velocity_mm_s, locks, v_f, -error_mm)
+
+    def _unlock_hold_command(self, v_f: float, target_v: float, now_s: float) -> float:
+        """Back at speed, before the velocity lock releases: P on the voltage less the rise
+        still decaying (see ``unlock_hold_rise_tau_s``)."""
+        cfg = self.config
+        s = self._s
+        tau = cfg.unlock_hold_rise_tau_s
+        if tau <= 0.0 or s.at_speed_since is None:
+            return 0.0
+        if s.hold_rise_v is None:
+            # The excess over the voltage at full speed before the slow-down (the plate's own
+            # drift while locked is counted as rise: the estimate errs on the high side).
+            s.hold_rise_v = max(0.0, v_f - target_v - s.at_speed_error_v)
+        rise_v = s.hold_rise_v * math.exp(-(now_s - s.at_speed_since) / tau)
+        error_v = target_v - (v_f - rise_v)
+        if error_v > 0.0:
+            # Up only on a voltage that is low by itself: an estimate of the rise too large
+            # must not lift the torch.
+            error_v = max(0.0, target_v - v_f)
+        if abs(error_v) <= cfg.deadband_v:
+            return 0.0
+        error_v -= cfg.deadband_v if error_v > 0 else -cfg.deadband_v
+        return cfg.kp_per_s * error_v / cfg.slope_v_per_mm
 
     @property
     def slow_target_v(self) -> float | None:

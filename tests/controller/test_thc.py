@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import replace
 from typing import Any
 
@@ -452,3 +453,33 @@ def test_the_plate_moving_under_the_held_torch_is_added_to_the_slow_target() -> 
     assert _rising_plate_slow_down() == pytest.approx(125.0, abs=0.4)
     # Without it the target is short by the plate's rise while held (about 0.15 mm).
     assert _rising_plate_slow_down(slow_plate_feedforward=0.0) < 124.2
+
+
+def _back_at_speed(climb_v_s: float, **cfg: Any) -> list[float]:
+    """A 0.1 s corner at half speed (a 5 V rise), then full speed again: the rise decays
+    (time constant 0.04 s) while a plate falling away adds ``climb_v_s``. Velocities during
+    the velocity lock's unlock hold (0.1 s)."""
+    thc = running(**cfg)
+    t, _ = slow_down(thc, 120.0, 0.2, 0.0, speed=100.0)
+    t, _ = slow_down(thc, 125.0, 0.1, t)
+    held: list[float] = []
+    start = t
+    while True:
+        t += 0.005
+        volts = 120.0 + 5.0 * math.exp(-(t - start) / 0.04) + climb_v_s * (t - start)
+        velocity = step(thc, volts, t)
+        if Lock.VELOCITY not in thc.locks(t):
+            return held
+        held.append(velocity)
+
+
+def test_during_the_unlock_hold_z_follows_a_plate_falling_away_not_the_decaying_rise() -> None:
+    """Back at speed the velocity lock holds 0.1 s longer while the slow-down's rise decays.
+    The loop acts then on the voltage less the rise left (decaying from its excess at the
+    hold's start): a plate falling away (20 V/s) takes the torch down before the lock
+    releases; the decaying rise alone moves Z neither way."""
+    falling = _back_at_speed(20.0)
+    assert min(falling) < -0.5
+    assert max(falling) <= 0.0
+    assert _back_at_speed(0.0) == pytest.approx([0.0] * len(falling))
+    assert _back_at_speed(20.0, unlock_hold_rise_tau_s=0.0) == [0.0] * len(falling)
