@@ -13,6 +13,7 @@ simavr); this package (MIT) only builds it with ``make`` and runs it as a separa
 from __future__ import annotations
 
 from .build import (
+    ARC_INPUTS,
     INSTALL_HINT,
     MCUS,
     BuildError,
@@ -39,6 +40,7 @@ from .harness import (
 )
 
 __all__ = [
+    "ARC_INPUTS",
     "INSTALL_HINT",
     "MCUS",
     "BoardStatus",

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Final
 
 __all__ = [
+    "ARC_INPUTS",
     "INSTALL_HINT",
     "MCUS",
     "BuildError",
@@ -24,6 +25,11 @@ __all__ = [
 ]
 
 MCUS: Final = ("atmega2560", "atmega328p")
+# How the firmware reads the arc voltage: the ADC (both MCUs), or a voltage-to-frequency
+# card (THCAD type) on the Mega 2560's T5 pin (a build of its own: the Nano has no such
+# option, its T1 pin is the OHMIC input).
+ARC_INPUTS: Final = ("adc", "vtof")
+VTOF_MCUS: Final = ("atmega2560",)
 INSTALL_HINT: Final = (
     "sudo apt-get install simavr libsimavr-dev libsimavrparts1 gcc-avr avr-libc "
     "binutils-avr libelf-dev pkg-config"
@@ -64,8 +70,19 @@ def host_binary(root: Path) -> Path:
     return root / "firmware" / "emulator" / "build" / "dthc-emulated-board-host"
 
 
-def firmware_elf(root: Path, mcu: str) -> Path:
-    return root / "firmware" / "build" / mcu / "dthc-firmware.elf"
+def firmware_elf(root: Path, mcu: str, arc_input: str = "adc") -> Path:
+    """The firmware's ELF for ``mcu`` and its arc front end (``make -C firmware`` builds
+    all three: atmega2560, atmega328p, atmega2560-vtof)."""
+    if arc_input not in ARC_INPUTS:
+        raise EmulatedBoardError(f"arc input {arc_input!r}: one of {', '.join(ARC_INPUTS)}")
+    if arc_input == "adc":
+        return root / "firmware" / "build" / mcu / "dthc-firmware.elf"
+    if mcu not in VTOF_MCUS:
+        raise EmulatedBoardError(
+            f"the {mcu} build has no V-to-F arc input (its T1 pin is the OHMIC input); "
+            "the Mega 2560's is T5 (D47)"
+        )
+    return root / "firmware" / "build" / f"{mcu}-{arc_input}" / "dthc-firmware.elf"
 
 
 def selftest_elf(root: Path, mcu: str) -> Path:

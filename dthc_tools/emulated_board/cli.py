@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .build import (
+    ARC_INPUTS,
     INSTALL_HINT,
     MCUS,
     EmulatedBoardError,
@@ -49,6 +50,12 @@ MODEL_OPTIONS: tuple[tuple[str, str], ...] = (
     ("lose-above-mm", "a transferred arc is lost above this height (default 10)"),
     ("pilot-timeout-ms", "a pilot that never transfers ends after this (default 3000)"),
 )
+# The voltage-to-frequency card's nominal scaling (--arc-input vtof): (name, help).
+VTOF_OPTIONS: tuple[tuple[str, str], ...] = (
+    ("vtof-zero-hz", "the card's frequency at 0 V input (default 121000)"),
+    ("vtof-full-hz", "the card's frequency at full-scale input (default 925000)"),
+    ("vtof-full-v", "the card's full-scale input in volts (default 10)"),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,9 +73,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, help="write the event record here")
     p.add_argument("--seed", type=int, default=1, help="noise seed")
     p.add_argument("--no-build", action="store_true", help="do not run make first")
+    p.add_argument(
+        "--arc-input",
+        choices=ARC_INPUTS,
+        default=ARC_INPUTS[0],
+        help="the arc front end: the ADC, or a V-to-F card on the Mega's T5 (the vtof build)",
+    )
     m = p.add_argument_group("plate and arc model")
     for name, text in MODEL_OPTIONS:
         m.add_argument(f"--{name}", type=float, help=text)
+    v = p.add_argument_group("voltage-to-frequency card (--arc-input vtof)")
+    for name, text in VTOF_OPTIONS:
+        v.add_argument(f"--{name}", type=float, help=text)
     return p
 
 
@@ -81,7 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.elf is not None:
             elf = args.elf
         else:
-            elf = firmware_elf(root, args.mcu)
+            elf = firmware_elf(root, args.mcu, args.arc_input)
         if not args.no_build:
             ensure_built(root, firmware=args.elf is None and not args.selftest)
     except ToolsMissing as exc:
@@ -96,10 +112,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_SETUP
     host = host_binary(root)
     command = [str(host), "--elf", str(elf), "--mcu", args.mcu, "--pty", str(args.pty)]
-    command += ["--seed", str(args.seed)]
+    command += ["--seed", str(args.seed), "--arc-input", args.arc_input]
     if args.record is not None:
         command += ["--record", str(args.record)]
-    for name, _ in MODEL_OPTIONS:
+    for name, _ in (*MODEL_OPTIONS, *VTOF_OPTIONS):
         value = getattr(args, name.replace("-", "_"))
         if value is not None:
             command += [f"--{name}", repr(value)]

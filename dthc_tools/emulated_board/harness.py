@@ -64,6 +64,13 @@ class HarnessOptions:
     model: Mapping[str, float] = field(default_factory=dict)
     build: bool = True  # run make first (only what is stale is rebuilt)
     stderr: Path | None = None  # the host's log (simavr's own lines, exit summary)
+    # The arc front end: "adc" (the ADC channel), or "vtof" (a voltage-to-frequency card on
+    # the Mega's T5: the host drives the pin, and ``elf`` None picks the vtof build).
+    arc_input: str = "adc"
+    # The card's nominal scaling (None: the host's defaults, 121 kHz at 0 V, 925 kHz at
+    # 10 V), e.g. {"vtof-zero-hz": 100000.0}: vtof-zero-hz, vtof-full-hz, vtof-full-v.
+    vtof: Mapping[str, float] = field(default_factory=dict)
+    speed: float | None = None  # simulated seconds per wall second (0: flat out)
 
 
 @dataclass(frozen=True)
@@ -119,9 +126,13 @@ class EmulatedBoard:
     def command_line(self) -> list[str]:
         o = self.options
         root = checkout_root()
-        elf = o.elf if o.elf is not None else firmware_elf(root, o.mcu)
+        elf = o.elf if o.elf is not None else firmware_elf(root, o.mcu, o.arc_input)
         argv = [str(host_binary(root)), "--elf", str(elf), "--mcu", o.mcu, "--pty", str(self.pty)]
-        argv += ["--seed", str(o.seed)]
+        argv += ["--seed", str(o.seed), "--arc-input", o.arc_input]
+        for key, value in o.vtof.items():
+            argv += [f"--{key}", repr(float(value))]
+        if o.speed is not None:
+            argv += ["--speed", repr(float(o.speed))]
         if o.record is not None:
             argv += ["--record", str(o.record)]
         for key, value in o.model.items():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -31,3 +32,38 @@ def test_a_checkout_without_the_emulator_is_named(
     monkeypatch.setattr(cli, "checkout_root", build.checkout_root)
     assert cli.main(["--pty", str(tmp_path / "board")]) == cli.EXIT_SETUP
     assert "installed editable from a source checkout" in capsys.readouterr().err
+
+
+def test_arc_input_vtof_runs_the_vtof_build_with_the_card_model(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """``--arc-input vtof`` execs the host with the Mega's vtof ELF
+    (firmware/build/atmega2560-vtof) and passes the card's scaling through."""
+    calls: list[list[str]] = []
+
+    def fake_execv(path: str, argv: list[str]) -> None:
+        calls.append(argv)
+
+    monkeypatch.setattr(cli, "ensure_built", lambda root, firmware: None)
+    monkeypatch.setattr(os, "execv", fake_execv)
+    pty = str(tmp_path / "board")
+    cli.main(["--pty", pty, "--arc-input", "vtof", "--vtof-zero-hz", "100000"])
+    (argv,) = calls
+    elf = Path(argv[argv.index("--elf") + 1])
+    assert elf.parts[-2:] == ("atmega2560-vtof", "dthc-firmware.elf")
+    assert argv[argv.index("--arc-input") + 1] == "vtof"
+    assert float(argv[argv.index("--vtof-zero-hz") + 1]) == 100000.0
+    calls.clear()
+    cli.main(["--pty", pty])
+    assert Path(calls[0][calls[0].index("--elf") + 1]).parts[-2] == "atmega2560"
+
+
+def test_the_nano_has_no_vtof_build(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """The 328P's T1 pin is its OHMIC input: ``--mcu atmega328p --arc-input vtof`` says so
+    and exits 2."""
+    monkeypatch.setattr(cli, "ensure_built", lambda root, firmware: None)
+    argv = ["--pty", str(tmp_path / "board"), "--mcu", "atmega328p", "--arc-input", "vtof"]
+    assert cli.main(argv) == cli.EXIT_SETUP
+    assert "no V-to-F arc input" in capsys.readouterr().err

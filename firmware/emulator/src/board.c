@@ -192,6 +192,62 @@ static void adc_trigger_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 	avr_raise_irq(e->adc_irq + ADC_IRQ_ADC0 + e->pins->arc_adc, (uint32_t)(mv + 0.5));
 }
 
+/*
+ * The voltage-to-frequency card (--arc-input vtof): the T5 pin toggles at twice the card's
+ * frequency, each edge a simavr cycle timer. At every edge the arc voltage (the model now,
+ * plus noise held for VTOF_NOISE_HOLD_US, as often as the ADC draws it) sets the frequency
+ * until the next one; the edge times keep their fractions, so the mean rate is exact.
+ */
+double board_vtof_hz(struct emu *e, double arc_v)
+{
+	const struct vtof_card *c = &e->vtof;
+	double in_v = arc_v / (double)e->pins->arc_divider;
+	double x = c->full_v > 0.0 ? in_v / c->full_v : 0.0;
+	if (x < 0.0)
+		x = 0.0;
+	if (x > 1.0)
+		x = 1.0; /* the card saturates at its full scale */
+	return c->zero_hz + (c->full_hz - c->zero_hz) * x;
+}
+
+static avr_cycle_count_t vtof_edge(struct avr_t *avr, avr_cycle_count_t when, void *param)
+{
+	struct emu *e = param;
+	struct vtof_card *c = &e->vtof;
+	(void)avr;
+	c->level ^= 1;
+	if (c->level)
+		c->edges++;
+	avr_raise_irq(e->arc_vtof.irq, (uint32_t)c->level);
+	uint64_t t = board_us(e);
+	double v = plant_arc_model_v(e, t);
+	if (v > 0.0) {
+		if (t >= c->noise_until_us) {
+			c->noise_v = plant_noise(e);
+			c->noise_until_us = t + VTOF_NOISE_HOLD_US;
+		}
+		v += c->noise_v;
+		if (v < 0.0)
+			v = 0.0;
+	}
+	e->arc.last_v = v;
+	c->hz = board_vtof_hz(e, v);
+	c->next_edge += (double)EMU_FREQUENCY_HZ / (2.0 * c->hz);
+	avr_cycle_count_t next = (avr_cycle_count_t)(c->next_edge + 0.5);
+	return next > when ? next : when + 1;
+}
+
+static void vtof_arm(struct emu *e)
+{
+	if (e->arc_input != ARC_INPUT_VTOF)
+		return;
+	struct vtof_card *c = &e->vtof;
+	c->hz = board_vtof_hz(e, 0.0);
+	c->next_edge = (double)e->avr->cycle + (double)EMU_FREQUENCY_HZ / (2.0 * c->hz);
+	avr_cycle_timer_register(e->avr, (avr_cycle_count_t)((double)EMU_FREQUENCY_HZ / (2.0 * c->hz)),
+				 vtof_edge, e);
+}
+
 static void step_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
 	(void)irq;
@@ -449,6 +505,15 @@ int board_init(struct emu *e)
 		if (e->in_present[i] && bind_pin(e, &e->in_pins[i], p->in[i], input_name(i)))
 			return -1;
 	}
+	if (e->arc_input == ARC_INPUT_VTOF) {
+		if (!p->arc_vtof.port) {
+			fprintf(stderr, "dthc-emulated-board-host: --arc-input vtof: the %s build has no "
+				"V-to-F input (its T1 pin is OHMIC); the Mega 2560's is T5\n", e->mcu);
+			return -1;
+		}
+		if (bind_pin(e, &e->arc_vtof, p->arc_vtof, "ARC_VTOF (T5)"))
+			return -1;
+	}
 	relax_output_extints(e);
 	avr_irq_register_notify(e->step.irq, step_hook, e);
 	avr_irq_register_notify(e->dir.irq, dir_hook, e);
@@ -459,6 +524,7 @@ int board_init(struct emu *e)
 	e->last_raw_cycle = e->avr->cycle;
 	e->avr->data[MCUSR_ADDR] = MCUSR_PORF;
 	board_apply_inputs(e, 1);
+	vtof_arm(e);
 	return 0;
 }
 
@@ -548,6 +614,7 @@ static void after_reset(struct emu *e, const char *why)
 	e->xoff = 0;
 	e->rx_next_cycle = board_cycles(e);
 	board_apply_inputs(e, 1);
+	vtof_arm(e); /* simavr's reset cleared the cycle timers */
 }
 
 /* Run the core until the absolute cycle count end_cycles (a sleeping core may pass it by a

@@ -81,11 +81,14 @@ void control_status(struct emu *e, char *buf, size_t n)
 	if (len > 0 && (size_t)len < n)
 		snprintf(buf + len, n - (size_t)len,
 			 " rx_bytes=%llu rx_dropped=%llu tx_bytes=%llu tx_dropped=%llu "
-			 "steps_ignored=%llu reboots=%llu max_lag_ms=%.1f",
+			 "steps_ignored=%llu reboots=%llu max_lag_ms=%.1f arc_input=%s vtof_hz=%.0f "
+			 "vtof_edges=%llu",
 			 (unsigned long long)e->rx_bytes, (unsigned long long)e->rx_dropped,
 			 (unsigned long long)e->tx_bytes, (unsigned long long)e->tx_dropped,
 			 (unsigned long long)e->steps_ignored, (unsigned long long)e->reboots,
-			 e->max_lag_s * 1000.0);
+			 e->max_lag_s * 1000.0, e->arc_input == ARC_INPUT_VTOF ? "vtof" : "adc",
+			 e->arc_input == ARC_INPUT_VTOF ? e->vtof.hz : 0.0,
+			 (unsigned long long)e->vtof.edges);
 }
 
 static void reply(struct emu *e, const char *fmt, const char *arg)

@@ -42,6 +42,22 @@ enum emu_force { FORCE_AUTO = -1, FORCE_INACTIVE = 0, FORCE_ACTIVE = 1 };
 
 enum arc_state { ARC_OFF = 0, ARC_PILOT, ARC_TRANSFERRED, ARC_LOST, ARC_NO_TRANSFER };
 
+enum arc_input { ARC_INPUT_ADC = 0, ARC_INPUT_VTOF };
+
+/* The voltage-to-frequency card (--arc-input vtof): a square wave on T5 whose frequency
+ * follows the arc voltage, re-evaluated at each edge. */
+struct vtof_card {
+	double zero_hz;  /* at 0 V input */
+	double full_hz;  /* at full_v */
+	double full_v;   /* the card's full-scale input */
+	int level;       /* the pin now */
+	double next_edge; /* raw simavr cycles of the next edge (fractional: exact mean rate) */
+	double hz;       /* the frequency now */
+	double noise_v;  /* the arc noise held until noise_until_us */
+	uint64_t noise_until_us;
+	uint64_t edges;  /* rising edges driven */
+};
+
 /* Plate and arc model parameters (command line, some changeable at run time). */
 struct model_params {
 	double plate_mm;
@@ -58,6 +74,8 @@ struct model_params {
 	double pilot_timeout_ms;
 	double float_travel_mm;
 };
+
+#define VTOF_NOISE_HOLD_US 104 /* a fresh noise draw as often as the ADC converts */
 
 struct arc_model {
 	enum arc_state state;
@@ -91,6 +109,8 @@ struct emu {
 	const char *record_path;
 	struct model_params p;
 	uint64_t seed;
+	enum arc_input arc_input;
+	struct vtof_card vtof;
 
 	/* simulator */
 	const struct board_pins *pins;
@@ -110,7 +130,7 @@ struct emu {
 	/* pins */
 	struct pin_ref in_pins[IN_COUNT];
 	int in_present[IN_COUNT];
-	struct pin_ref step, dir, torch, ohmic_en, z_en;
+	struct pin_ref step, dir, torch, ohmic_en, z_en, arc_vtof;
 	int step_level, dir_level, torch_level, ohmic_en_level, z_en_level;
 
 	/* physics */
@@ -164,10 +184,13 @@ void board_apply_inputs(struct emu *e, int force_all);
 void board_queue_rx(struct emu *e, const uint8_t *data, size_t n);
 int board_rx_enabled(struct emu *e);
 double board_z_mm(const struct emu *e);
+double board_vtof_hz(struct emu *e, double arc_v);
 
 /* plant.c */
 double plant_surface_mm(const struct emu *e, uint64_t t_us);
 double plant_arc_voltage(struct emu *e, uint64_t t_us);
+double plant_arc_model_v(struct emu *e, uint64_t t_us);
+double plant_noise(struct emu *e);
 void plant_update(struct emu *e, uint64_t t_us);
 void plant_torch(struct emu *e, int on, uint64_t t_us);
 void plant_seed(struct emu *e);

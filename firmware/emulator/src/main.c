@@ -51,6 +51,7 @@ static void usage(FILE *f)
 		"       [--arc-ok-delay-ms MS] [--float-travel-mm MM] [--ocv-v V]\n"
 		"       [--transfer-max-mm MM] [--lose-above-mm MM] [--pilot-timeout-ms MS]\n"
 		"       [--speed FACTOR (simulated per wall second; 0: flat out, for benchmarks)]\n"
+		"       [--arc-input adc|vtof] [--vtof-zero-hz HZ] [--vtof-full-hz HZ] [--vtof-full-v V]\n"
 		"Runs a firmware ELF on simavr at 16 MHz, UART0 on a pty symlinked at PATH, paced to\n"
 		"the wall clock. Control commands on stdin (help: firmware/emulator/README.md).\n"
 		"SIGUSR2 resets the MCU (external reset); SIGTERM/SIGINT exit.\n");
@@ -60,7 +61,7 @@ enum {
 	OPT_ELF = 1000, OPT_PTY, OPT_MCU, OPT_RECORD, OPT_SEED, OPT_PLATE, OPT_WARP,
 	OPT_WARP_PERIOD, OPT_SLOPE, OPT_CUT_V, OPT_CUT_H, OPT_NOISE, OPT_ARC_OK_DELAY,
 	OPT_FLOAT_TRAVEL, OPT_OCV, OPT_TRANSFER_MAX, OPT_LOSE_ABOVE, OPT_PILOT_TIMEOUT, OPT_HELP,
-	OPT_SPEED,
+	OPT_SPEED, OPT_ARC_INPUT, OPT_VTOF_ZERO, OPT_VTOF_FULL, OPT_VTOF_FULL_V,
 };
 
 static const struct option long_opts[] = {
@@ -83,6 +84,10 @@ static const struct option long_opts[] = {
 	{"lose-above-mm", required_argument, 0, OPT_LOSE_ABOVE},
 	{"pilot-timeout-ms", required_argument, 0, OPT_PILOT_TIMEOUT},
 	{"speed", required_argument, 0, OPT_SPEED},
+	{"arc-input", required_argument, 0, OPT_ARC_INPUT},
+	{"vtof-zero-hz", required_argument, 0, OPT_VTOF_ZERO},
+	{"vtof-full-hz", required_argument, 0, OPT_VTOF_FULL},
+	{"vtof-full-v", required_argument, 0, OPT_VTOF_FULL_V},
 	{"help", no_argument, 0, OPT_HELP},
 	{0, 0, 0, 0},
 };
@@ -120,6 +125,10 @@ static int parse_args(struct emu *e, int argc, char **argv)
 	};
 	e->mcu = "atmega2560";
 	e->seed = 1;
+	e->arc_input = ARC_INPUT_ADC;
+	e->vtof.zero_hz = 121000.0;
+	e->vtof.full_hz = 925000.0;
+	e->vtof.full_v = 10.0;
 	e->speed = 1.0;
 	int c;
 	while ((c = getopt_long(argc, argv, "", long_opts, NULL)) != -1) {
@@ -138,6 +147,20 @@ static int parse_args(struct emu *e, int argc, char **argv)
 				return -1;
 			}
 			continue;
+		case OPT_ARC_INPUT:
+			if (!strcmp(optarg, "adc"))
+				e->arc_input = ARC_INPUT_ADC;
+			else if (!strcmp(optarg, "vtof"))
+				e->arc_input = ARC_INPUT_VTOF;
+			else {
+				fprintf(stderr, "dthc-emulated-board-host: --arc-input %s: adc or vtof\n",
+					optarg);
+				return -1;
+			}
+			continue;
+		case OPT_VTOF_ZERO: name = "vtof-zero-hz"; target = &e->vtof.zero_hz; break;
+		case OPT_VTOF_FULL: name = "vtof-full-hz"; target = &e->vtof.full_hz; break;
+		case OPT_VTOF_FULL_V: name = "vtof-full-v"; target = &e->vtof.full_v; break;
 		case OPT_SEED:
 			if (number("seed", optarg, &v))
 				return -1;
@@ -177,6 +200,12 @@ static int parse_args(struct emu *e, int argc, char **argv)
 	else {
 		fprintf(stderr, "dthc-emulated-board-host: --mcu %s: atmega2560 or atmega328p\n",
 			e->mcu);
+		return -1;
+	}
+	if (!(e->vtof.zero_hz > 0.0) || !(e->vtof.full_hz > e->vtof.zero_hz) ||
+	    e->vtof.full_hz > 4000000.0 || !(e->vtof.full_v > 0.0)) {
+		fprintf(stderr, "dthc-emulated-board-host: the V-to-F card needs 0 < --vtof-zero-hz "
+				"< --vtof-full-hz <= 4 MHz and --vtof-full-v > 0\n");
 		return -1;
 	}
 	if (p->warp_mm != 0.0 && p->warp_period_s <= 0.0) {

@@ -18,6 +18,7 @@ struct board_pins {
 	const char *mcu;
 	struct pin_map in[PINMAP_INPUTS];
 	struct pin_map step, dir, torch, ohmic_en, z_en;
+	struct pin_map arc_vtof; /* T5 on the Mega (the V-to-F card); {0, 0}: no such input */
 	int arc_adc;
 	long arc_divider;
 	long adc_ref_mv;

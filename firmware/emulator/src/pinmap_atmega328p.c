@@ -12,5 +12,6 @@ const struct board_pins pinmap_atmega328p = {
 		PINMAP_PIN(PIN_BREAKAWAY), {0, 0}, {0, 0},
 		PINMAP_PIN(PIN_ESTOP), {0, 0}, {0, 0},
 	},
+	.arc_vtof = {0, 0}, /* T1 (PD5) is OHMIC: no V-to-F option on the Nano */
 	PINMAP_COMMON,
 };

@@ -110,7 +110,8 @@ void plant_update(struct emu *e, uint64_t t_us)
 	}
 }
 
-double plant_arc_voltage(struct emu *e, uint64_t t_us)
+/* The model's arc voltage now, without noise. */
+double plant_arc_model_v(struct emu *e, uint64_t t_us)
 {
 	plant_update(e, t_us);
 	double v;
@@ -127,6 +128,19 @@ double plant_arc_voltage(struct emu *e, uint64_t t_us)
 	default:
 		v = 0.0;
 	}
+	return v;
+}
+
+/* One draw of the arc's noise (volts). */
+double plant_noise(struct emu *e)
+{
+	return e->p.noise_v > 0.0 ? e->p.noise_v * gaussian(&e->arc) : 0.0;
+}
+
+/* The voltage one ADC conversion sees: the model plus a fresh noise draw. */
+double plant_arc_voltage(struct emu *e, uint64_t t_us)
+{
+	double v = plant_arc_model_v(e, t_us);
 	if (v > 0.0 && e->p.noise_v > 0.0)
 		v += e->p.noise_v * gaussian(&e->arc);
 	if (v < 0.0)
