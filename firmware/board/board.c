@@ -46,7 +46,7 @@ bool board_queue(const uint8_t *wire, size_t n)
 }
 
 /* A frame whose payload is at buf + DTHC_TX_PAYLOAD_OFFSET: encoded in place (a CRC pass,
- * then COBS by rewriting the zeros: about 0.1 ms for a STATUS at 16 MHz), then queued. */
+ * COBS on the way by rewriting the zeros), then queued. */
 bool board_send_frame(uint8_t type, uint8_t seq, uint8_t *buf, uint8_t len)
 {
     return board_queue(buf, dthc_encode_in_place(type, seq, buf, len));
@@ -329,14 +329,38 @@ static void send_batch(void)
     B.n_batch = 0;
 }
 
-/* Main loop: encode a completed batch, and queue it at the next call, unless `hold` (a
- * frame is arriving, and its reply goes first). A frame that arrived during the encode is
- * read before that next call. */
-bool board_flush_samples(bool hold)
+/* A short frame is arriving (a QUERY is 7 bytes, 70 us on the wire at 1 Mbaud): a batch
+ * queued now would go out ahead of its reply (35 bytes, 0.35 ms of wire). The batch waits
+ * until the frame is complete, for at most BATCH_HOLD_US (a frame that never ends does not
+ * stop the samples). */
+#define BATCH_HOLD_FRAME_BYTES 32
+#define BATCH_HOLD_US 300u
+static bool batch_holding;
+static uint32_t batch_hold_since_us;
+
+static bool batch_waits_for_frame(void)
+{
+    uint32_t now;
+    if (board_rx.enc_len == 0 || board_rx.enc_len > BATCH_HOLD_FRAME_BYTES) {
+        batch_holding = false;
+        return false;
+    }
+    now = hal_time_us();
+    if (!batch_holding) {
+        batch_holding = true;
+        batch_hold_since_us = now;
+    }
+    return (uint32_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
+}
+
+/* Main loop, after the received bytes: encode a completed batch, and queue it at the next
+ * call (a frame that arrived during the encode is read, and answered, first), unless a
+ * short frame is arriving. */
+bool board_flush_samples(void)
 {
     uint8_t len = samples_ready_len;
     uint8_t *buf;
-    if (!len || hold) {
+    if (!len || batch_waits_for_frame()) {
         return false;
     }
     /* The tick does not swap while len != 0: the other buffer stays ours until then. */

@@ -396,30 +396,6 @@ static void frame(const dthc_frame_t *f)
     command(f->type, f->seq, f->payload);
 }
 
-/* A short frame is arriving (a QUERY is 7 bytes, 70 us on the wire at 1 Mbaud): a batch
- * queued now would go out ahead of its reply (35 bytes, 0.35 ms of wire). Hold the batch
- * back until the frame is complete, for at most BATCH_HOLD_US (a frame that never ends
- * does not stop the samples). */
-#define BATCH_HOLD_FRAME_BYTES 32
-#define BATCH_HOLD_US 300u
-static bool batch_holding;
-static uint32_t batch_hold_since_us;
-
-static bool batch_waits_for_frame(void)
-{
-    uint32_t now;
-    if (board_rx.enc_len == 0 || board_rx.enc_len > BATCH_HOLD_FRAME_BYTES) {
-        batch_holding = false;
-        return false;
-    }
-    now = hal_time_us();
-    if (!batch_holding) {
-        batch_holding = true;
-        batch_hold_since_us = now;
-    }
-    return (uint32_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
-}
-
 bool board_poll(void)
 {
     uint8_t budget = POLL_BYTES_MAX;
@@ -461,5 +437,5 @@ bool board_poll(void)
         }
     }
     /* Replies first: a batch waiting here is not time-critical, a reply is (1 ms). */
-    return board_flush_samples(batch_waits_for_frame()) || did;
+    return board_flush_samples() || did;
 }

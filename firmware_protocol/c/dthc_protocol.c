@@ -409,28 +409,48 @@ size_t dthc_frame_seal(uint8_t type, uint8_t seq, uint8_t *buf, size_t len)
 
 size_t dthc_encode_in_place(uint8_t type, uint8_t seq, uint8_t *buf, size_t len)
 {
-    size_t total = len + 4;
-    uint8_t *p;
-    uint8_t *next_zero;
-    if (total > 254) { /* a full block may shift the bytes: the one-pass encoder */
+    uint8_t *p = buf + 1;
+    uint8_t *end;
+    uint8_t *code_p = buf; /* the open block's code byte: buf[0], then each zero in turn */
+    uint8_t hi = (uint8_t)(DTHC_CRC_INIT >> 8);
+    uint8_t lo = (uint8_t)(DTHC_CRC_INIT & 0xFFu);
+    if (len + 4 > 254) { /* a full block may shift the bytes: the one-pass encoder */
+        if (len > DTHC_MAX_PAYLOAD) {
+            return 0;
+        }
         return dthc_encode_frame(type, seq, buf + DTHC_TX_PAYLOAD_OFFSET, len, buf,
                                  len + DTHC_TX_PAYLOAD_OFFSET + 4);
     }
-    (void)dthc_frame_seal(type, seq, buf, len);
     /* Up to 254 body bytes COBS keeps every byte where it is, one to the right of its
-     * body index: the body at buf + 1 is its own encoding once each zero holds the distance
-     * to the next zero (or to the delimiter) and buf[0] the distance to the first one. */
-    p = buf + total + 1;
-    *p = DTHC_DELIMITER;
-    next_zero = p;
-    while (--p != buf) {
-        if (!*p) {
-            *p = (uint8_t)(next_zero - p);
-            next_zero = p;
+     * body index: the body at buf + 1 is its own encoding once buf[0] and each zero hold
+     * the distance to the next zero (or to the delimiter). One pass: CRC and codes. */
+    buf[1] = type;
+    buf[2] = seq;
+    end = p + 2 + len;
+    while (p != end) {
+        uint8_t b = *p;
+        uint16_t t = DTHC_CRC_TABLE_READ((uint8_t)(hi ^ b));
+        hi = (uint8_t)(lo ^ (uint8_t)(t >> 8));
+        lo = (uint8_t)t;
+        if (!b) {
+            *code_p = (uint8_t)(p - code_p);
+            code_p = p;
         }
+        p++;
     }
-    *p = (uint8_t)(next_zero - p);
-    return total + 2;
+    p[0] = hi;
+    if (!hi) {
+        *code_p = (uint8_t)(p - code_p);
+        code_p = p;
+    }
+    p[1] = lo;
+    if (!lo) {
+        *code_p = (uint8_t)(p + 1 - code_p);
+        code_p = p + 1;
+    }
+    *code_p = (uint8_t)(p + 2 - code_p);
+    p[2] = DTHC_DELIMITER;
+    return len + 6;
 }
 
 void dthc_frame_stream(const uint8_t *buf, size_t len, dthc_sink_fn sink)
