@@ -64,8 +64,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# Two workers, a test file each at a time (module fixtures, such as one emulated board,
+# stay shared): the end-to-end tests spend most of their time waiting on real time.
 unit: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n 2 --dist loadfile
 
 test: $(STAMP) broker browser systemd-tools firmware lint typecheck unit
 
