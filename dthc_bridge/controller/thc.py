@@ -79,7 +79,7 @@ class ThcConfig:
     # Steady slow-downs: follow the plate against the voltage measured once the rise has
     # settled (see the module docstring). Off: the velocity lock holds Z to the end.
     slow_follow: bool = True
-    slow_min_settle_s: float = 0.15  # speed steady at least this long before measuring
+    slow_min_settle_s: float = 0.2  # speed steady at least this long before measuring
     slow_max_settle_s: float = 0.5  # the voltage never settled by then: stay locked
     slow_window_s: float = 0.04  # the two windows compared for "settled", and averaged
     slow_settled_v: float = 0.4  # settled: window means differ by no more than this

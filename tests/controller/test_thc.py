@@ -483,3 +483,16 @@ def test_during_the_unlock_hold_z_follows_a_plate_falling_away_not_the_decaying_
     assert max(falling) <= 0.0
     assert _back_at_speed(0.0) == pytest.approx([0.0] * len(falling))
     assert _back_at_speed(20.0, unlock_hold_rise_tau_s=0.0) == [0.0] * len(falling)
+
+
+def test_the_slow_target_is_measured_once_the_rise_has_all_but_settled() -> None:
+    """The slow-down's rise comes in with a 0.05 s time constant: the target is measured
+    no earlier than 0.2 s into the steady speed, when less than 0.2 V of it is missing (at
+    0.15 s the windows already agree within 0.4 V, with 0.3 V still to come)."""
+    thc = running()
+    t = 0.0
+    start = t
+    while thc.slow_target_v is None and t < 1.0:
+        t += 0.005
+        step(thc, 120.0 + 5.0 * (1.0 - math.exp(-(t - start) / 0.05)), t, speed=50.0)
+    assert thc.slow_target_v == pytest.approx(125.0, abs=0.2)
