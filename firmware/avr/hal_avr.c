@@ -149,23 +149,29 @@ uint16_t hal_uart_tx_free(void)
 
 bool hal_uart_write(const uint8_t *data, uint16_t n)
 {
-    uint8_t h;
+    uint8_t *dst;
+    uint8_t *wrap = tx_ring + HAL_TX_RING;
+    uint8_t k = 0;
     if (n > hal_uart_tx_free()) {
         return false;
     }
-    h = tx_head;
-    {
-        uint8_t *dst = tx_ring + h;
-        uint8_t *wrap = tx_ring + HAL_TX_RING;
-        h = (uint8_t)((h + n) & TX_MASK);
-        while (n--) { /* a pointer walk: half the cycles of indexing the ring */
-            *dst++ = *data++;
-            if (dst == wrap) {
-                dst = tx_ring;
-            }
+    /* Each byte is handed to the transmit interrupt as soon as it is in the ring (tx_head:
+     * one byte, atomic), so the line starts while the copy runs; the interrupt is enabled
+     * once two bytes are in (the UART takes two at once: enabled after one, it would catch
+     * up and stop), and again at the end. A pointer walk: half the cycles of indexing the
+     * ring. The producers never run concurrently (the tick, or the main loop with the tick
+     * locked): no other frame slips in between. */
+    dst = tx_ring + tx_head;
+    while (n--) {
+        *dst++ = *data++;
+        if (dst == wrap) {
+            dst = tx_ring;
+        }
+        tx_head = (uint8_t)(dst - tx_ring);
+        if (++k == 2) {
+            ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
         }
     }
-    tx_head = h; /* one byte: the UDRE interrupt sees all of the frame or none */
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { UCSR0B |= _BV(UDRIE0); }
     return true;
 }
@@ -213,7 +219,9 @@ uint32_t hal_time_us(void)
     uint32_t o;
     uint16_t c;
     clock_read(&o, &c);
-    return (o << 15) + (c >> 1);
+    /* (o << 15) + (c >> 1) without a 15-step shift loop: byte moves and one shift. */
+    return (uint32_t)((((uint32_t)(uint16_t)o << 16) | c) >> 1)
+           | ((uint32_t)((uint16_t)(o >> 16) & 1u) << 31);
 }
 
 uint64_t hal_time_us64(void)

@@ -17,6 +17,10 @@ static int32_t target_steps;     /* the Z_MOVE target, or the probe's end, in st
 static int32_t brake_full_um; /* distance beyond which braking never limits the speed */
 static int32_t creep_um_s;    /* the slowest approach: Z stops from it within one tick */
 
+/* Z idle at rest, and the step generator told so by the tick that stopped it: until a
+ * command starts a motion, a tick has nothing to do for Z (about 25 us saved per tick). */
+static bool z_at_rest;
+
 static uint32_t isqrt32(uint32_t x)
 {
     uint32_t r = 0;
@@ -88,6 +92,7 @@ void board_z_init(void)
     max_steps = steps_of(c->z_max_um);
     board_z_update_dv();
     hal_z_drive(0, min_steps, max_steps);
+    z_at_rest = false;
 }
 
 bool board_z_busy(void)
@@ -229,9 +234,9 @@ static int32_t approach_um_s(int32_t d_um, int32_t feed)
 
 void board_z_tick(void)
 {
-    const board_config_t *c = B.cfg;
-    int32_t steps = hal_z_steps();
-    int32_t z = um_of_steps(steps);
+    const board_config_t *c;
+    int32_t steps;
+    int32_t z;
     int32_t lo = min_steps; /* the step generator's bounds */
     int32_t hi = max_steps;
     int32_t want = 0;
@@ -239,6 +244,16 @@ void board_z_tick(void)
     int32_t v = B.z_v_um_s;
     int32_t dv = B.z_dv_um_s;
 
+    if (B.z_mode == Z_IDLE && v == 0) {
+        if (z_at_rest) {
+            return;
+        }
+    } else {
+        z_at_rest = false;
+    }
+    c = B.cfg;
+    steps = hal_z_steps();
+    z = um_of_steps(steps);
     switch (B.z_mode) {
     case Z_MOVE: {
         int32_t d = B.z_target_um - z;
@@ -325,4 +340,5 @@ void board_z_tick(void)
     }
     rate = ((v < 0 ? -v : v) * steps_per_um_q14) >> 14;
     hal_z_drive(v < 0 ? -rate : rate, lo, hi);
+    z_at_rest = B.z_mode == Z_IDLE && v == 0;
 }
