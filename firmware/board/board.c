@@ -46,7 +46,8 @@ bool board_queue(const uint8_t *wire, size_t n)
 }
 
 /* A frame whose payload is at buf + DTHC_TX_PAYLOAD_OFFSET: encoded in place (a CRC pass,
- * COBS on the way by rewriting the zeros), then queued. */
+ * COBS on the way by rewriting the zeros: about 75 us for a STATUS at 16 MHz), then
+ * queued. */
 bool board_send_frame(uint8_t type, uint8_t seq, uint8_t *buf, uint8_t len)
 {
     return board_queue(buf, dthc_encode_in_place(type, seq, buf, len));

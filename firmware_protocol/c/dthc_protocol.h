@@ -38,10 +38,14 @@
  *
  * Speed, because a board has 1 ms to reply (PROTOCOL.md section 8): the CRC is table-driven
  * (512 bytes, in flash on AVR via PROGMEM, as is the payload-size table) and nothing is
- * copied. Measured in simavr, ATmega328P at 16 MHz, avr-gcc -Os: a STATUS encoded in place
- * with dthc_encode_frame about 175 us (dthc_encode about 295 us; the codec before this API
- * 525 us); a QUERY received through dthc_rx_feed about 95 us (dthc_rx_feed_byte 210 us,
- * before 300 us).
+ * copied. Measured in simavr at 16 MHz, avr-gcc -Os: a STATUS encoded by
+ * dthc_encode_in_place about 75 us (ATmega2560 and ATmega328P; CRC and COBS in one pass
+ * that rewrites only the zeros); with dthc_encode_frame about 175 us before its pointer
+ * walk (dthc_encode about 295 us; the codec before this API 525 us); a QUERY received
+ * through dthc_rx_feed about 95 us (dthc_rx_feed_byte 210 us, before 300 us). On the
+ * emulated boards a lone QUERY(STATUS) gets its reply's first byte out 0.36 ms (p50; max
+ * 0.51 ms) and its delimiter 0.76 ms (max 0.92 ms) after the query's delimiter arrived
+ * (tests/emulated_board/test_firmware_board.py).
  *
  * Not thread-safe per object: one dthc_rx_t per link, fed from one context.
  */
@@ -476,7 +480,7 @@ size_t dthc_encode_frame(uint8_t type, uint8_t seq, const uint8_t *payload, size
  * buf + DTHC_TX_PAYLOAD_OFFSET (buf holds len + DTHC_TX_PAYLOAD_OFFSET + 4 bytes): sealed,
  * with COBS in the same pass, up to 254 body bytes, by rewriting only the zeros (every
  * other byte is already where COBS puts it): the fastest way to a queueable frame on AVR,
- * about 60 us for a STATUS at 16 MHz. Returns n, 0 when len > DTHC_MAX_PAYLOAD. */
+ * about 75 us for a STATUS at 16 MHz. Returns n, 0 when len > DTHC_MAX_PAYLOAD. */
 size_t dthc_encode_in_place(uint8_t type, uint8_t seq, uint8_t *buf, size_t len);
 typedef void (*dthc_sink_fn)(const uint8_t *bytes, uint8_t n);
 size_t dthc_frame_seal(uint8_t type, uint8_t seq, uint8_t *buf, size_t len);
