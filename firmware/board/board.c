@@ -337,21 +337,21 @@ static void send_batch(void)
 #define BATCH_HOLD_FRAME_BYTES 32
 #define BATCH_HOLD_US 300u
 static bool batch_holding;
-static uint32_t batch_hold_since_us;
+static uint16_t batch_hold_since_us; /* low 16 bits of the clock: RAM is short on the Nano */
 
 static bool batch_waits_for_frame(void)
 {
-    uint32_t now;
+    uint16_t now;
     if (board_rx.enc_len == 0 || board_rx.enc_len > BATCH_HOLD_FRAME_BYTES) {
         batch_holding = false;
         return false;
     }
-    now = hal_time_us();
+    now = (uint16_t)hal_time_us();
     if (!batch_holding) {
         batch_holding = true;
         batch_hold_since_us = now;
     }
-    return (uint32_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
+    return (uint16_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
 }
 
 /* Main loop, after the received bytes: encode a completed batch, and queue it at the next

@@ -763,6 +763,57 @@ static int test_calibration_and_filters(void)
     return 0;
 }
 
+/* A batch completed while a short frame is arriving waits for it (its reply goes out
+ * first), but for at most 0.3 ms: a frame that never ends does not stop the samples. */
+static int test_batch_waits_for_a_short_frame(void)
+{
+    uint8_t what = DTHC_QUERY_STATUS;
+    uint8_t wire[DTHC_MAX_WIRE_FRAME];
+    size_t n = dthc_encode_frame(DTHC_MSG_QUERY, 9, &what, 1, wire, sizeof wire);
+    unsigned mark, i, status_at = 0, samples_at = 0;
+    run_ms(4); /* 4 of the batch's 5 samples */
+    mark = n_out;
+    fake_rx(wire, 3); /* the QUERY's first bytes */
+    while (board_poll()) {
+    }
+    fake_run_us(1000); /* the 5th sample: the batch is complete */
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(count(DTHC_MSG_SAMPLES, -1, mark) == 0, "a batch went out during the frame");
+    fake_rx(wire + 3, (unsigned)n - 3u);
+    while (board_poll()) {
+    }
+    parse();
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_STATUS && !status_at) {
+            status_at = i + 1;
+        }
+        if (out[i].type == DTHC_MSG_SAMPLES && !samples_at) {
+            samples_at = i + 1;
+        }
+    }
+    CHECK(status_at && samples_at && status_at < samples_at,
+          "STATUS at %u, SAMPLES at %u: the reply first", status_at, samples_at);
+
+    run_ms(4);
+    mark = n_out;
+    fake_rx(wire, 3); /* a frame that never ends */
+    while (board_poll()) {
+    }
+    fake_run_us(1000);
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(count(DTHC_MSG_SAMPLES, -1, mark) == 0, "the batch did not wait at all");
+    fake_run_us(400);
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(count(DTHC_MSG_SAMPLES, -1, mark) == 1, "the batch waited more than 0.3 ms");
+    return 0;
+}
+
 /* Batches: N samples, t0 steps by N x period, stream_seq counts. */
 static int test_batches(void)
 {
@@ -880,6 +931,7 @@ static const struct {
     T(configure_out_of_range),
     T(calibration_and_filters),
     T(batches),
+    T(batch_waits_for_a_short_frame),
     T(unsupported_and_lease_range),
     T(arc_lost),
     T(limit_switch_stops_and_latches),
