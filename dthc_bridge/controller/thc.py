@@ -22,12 +22,15 @@ about the open controllers (docs/plasma-facts.md):
   and the voltage rise of the slower cut has settled (two consecutive windows of the
   filtered voltage agree), the voltage measured then (never below the cut target: slowing
   down only raises it; plus what the plate moved under the held torch, extrapolated from
-  the Z speed that followed it at full feed over the distance cut while held) becomes a
+  the Z speed that followed it at full feed over the distance cut while held, less what Z
+  moved meanwhile on that prediction) becomes a
   temporary target, and the loop follows the plate again,
   with its Z travel while following summed over the cut and bounded: ``slow_follow_max_mm``
   each way, and down no more than half the cut height (set by the sequence). A change of
   speed or a stale speed drops back to the plain lock, a void pauses it; at speed again,
   the cut target applies.
+  While the rise settles, Z already follows the plate it predicts (that full-feed Z speed
+  times the speed ratio, when above ``slow_settle_min_mm_s``), within the same bounds.
 - **Kerf and void dive**: the slope of the filtered voltage locks the THC above
   ``void_slope_v_s`` and holds the lock for a quiet period after the spike.
 - **Operator pause**: ``held`` locks until the program resumes (or the next cut starts).
@@ -91,6 +94,10 @@ class ThcConfig:
     # The plate keeps moving under the held torch until the slow target is measured: add the
     # Z speed that followed it at full feed, times the time held (this fraction of it).
     slow_plate_feedforward: float = 1.0
+    # While that rise settles Z already moves the same way (times this): it follows the
+    # plate it predicts. 0: Z holds until the slow target is measured.
+    slow_settle_feedforward: float = 1.0
+    slow_settle_min_mm_s: float = 0.3  # a slower Z at full feed is noise: no prediction
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -130,12 +137,14 @@ class _State:
     # Since the velocity lock last engaged: the time held weighted by the speed ratio (the
     # distance cut, in seconds at full feed). None: not locked from full speed.
     held_feed_s: float | None = None
+    held_travel_mm: float = 0.0  # Z travel on the prediction while held
     full_speed_integral_mm_s: float = 0.0  # the integral to restore at speed
     slow_travel_mm: float = 0.0  # Z travel while following, summed over the cut
 
 
 _DELAY_ONLY = frozenset({Lock.FROZEN})
 _VELOCITY_ONLY = frozenset({Lock.VELOCITY})
+_STEADY_S = 0.03  # a speed this steady below the lock is a slow-down, not a corner
 
 
 class ThcController:
@@ -206,6 +215,7 @@ class ThcController:
             s.velocity_locked = True
             s.at_speed_since = None
             s.held_feed_s = 0.0
+            s.held_travel_mm = 0.0
 
     def locks(self, now_s: float) -> frozenset[Lock]:
         s = self._s
@@ -273,6 +283,7 @@ class ThcController:
         locks = self.locks(now_s)
         error_mm = 0.0
         command = 0.0
+        predicting = False  # moving Z on the plate predicted while a slow-down settles
         target_v = self.target_v if s.slow_target_v is None else s.slow_target_v
         if self.target_v is not None and not locks and s.slow_target_v is None:
             # Averaged over about 0.1 s: one noisy sample must not set the next slow target.
@@ -295,11 +306,17 @@ class ThcController:
                 command = cfg.kp_per_s * error_mm  # up only, and no integral yet
             elif locks == _VELOCITY_ONLY and s.at_speed_since is not None:
                 command = self._unlock_hold_command(v_f, target_v, now_s)
+            elif locks == _VELOCITY_ONLY and self._settling_slow_down(now_s):
+                v = s.at_speed_velocity_mm_s
+                if abs(v) > cfg.slow_settle_min_mm_s:
+                    command = cfg.slow_settle_feedforward * v * s.speed_ratio
+                    predicting = True
         limit = self.max_speed_mm_s
         command = max(-limit, min(limit, command))
-        if s.slow_target_v is not None:
-            # Following a slow-down on a measured target: bounded travel over the cut,
-            # braking in time to stop at the bound.
+        bounded = s.slow_target_v is not None or predicting
+        if bounded:
+            # Following a slow-down (on a measured target, or predicted while it settles):
+            # bounded travel over the cut, braking in time to stop at the bound.
             if command > 0.0:
                 room = cfg.slow_follow_max_mm - s.slow_travel_mm
             else:
@@ -314,9 +331,23 @@ class ThcController:
             command = max(-braking, min(braking, command))
         step = cfg.max_accel_mm_s2 * dt_s
         s.velocity_mm_s = max(s.velocity_mm_s - step, min(s.velocity_mm_s + step, command))
-        if s.slow_target_v is not None:
+        if bounded:
             s.slow_travel_mm += s.velocity_mm_s * dt_s
+        if s.slow_target_v is None and Lock.VELOCITY in locks:
+            s.held_travel_mm += s.velocity_mm_s * dt_s
         return ThcOutput(s.velocity_mm_s, locks, v_f, -error_mm)
+
+    def _settling_slow_down(self, now_s: float) -> bool:
+        """A steady slow-down whose rise is settling (following could start soon)."""
+        cfg = self.config
+        s = self._s
+        return (
+            cfg.slow_follow
+            and s.held_feed_s is not None
+            and s.slow_target_v is None
+            and s.speed_ratio * 100.0 >= cfg.slow_min_percent
+            and _STEADY_S <= now_s - s.steady_since_s <= cfg.slow_max_settle_s
+        )
 
     def _unlock_hold_command(self, v_f: float, target_v: float, now_s: float) -> float:
         """Back at speed, before the velocity lock releases: P on the voltage less the rise
@@ -402,9 +433,8 @@ class ThcController:
         # the torch already had at full speed is not kept.
         # A plate that rose under the held torch lowered the voltage measured: add it back.
         held_s = 0.0 if s.held_feed_s is None else s.held_feed_s
-        plate_v = (
-            cfg.slow_plate_feedforward * s.at_speed_velocity_mm_s * held_s * cfg.slope_v_per_mm
-        )
+        plate_mm = cfg.slow_plate_feedforward * s.at_speed_velocity_mm_s * held_s
+        plate_v = (plate_mm - s.held_travel_mm) * cfg.slope_v_per_mm
         s.slow_target_v = max(measured - s.at_speed_error_v + plate_v, self.target_v)
         s.full_speed_integral_mm_s = s.integral_mm_s
         # The integral is the Z speed that followed the plate at full feed: scale it.

@@ -496,3 +496,40 @@ def test_the_slow_target_is_measured_once_the_rise_has_all_but_settled() -> None
         t += 0.005
         step(thc, 120.0 + 5.0 * (1.0 - math.exp(-(t - start) / 0.05)), t, speed=50.0)
     assert thc.slow_target_v == pytest.approx(125.0, abs=0.2)
+
+
+def _settling_velocities(plate_mm_s: float, **cfg: Any) -> tuple[list[float], list[float]]:
+    """A plate rising ``plate_mm_s`` at full feed under a torch the loop follows, then a
+    ramp down to half speed (speed changing every step: a corner's profile) and a steady
+    half-speed slow-down. Z velocities (while ramping, while settling)."""
+    thc = running(**cfg)
+    z = plate = t = 0.0
+    dt = 0.005
+    ramp: list[float] = []
+    settle: list[float] = []
+    for i in range(600):
+        speed = 100.0 if i < 400 else max(50.0, 100.0 - 5.0 * (i - 400))
+        plate += plate_mm_s * speed / 100.0 * dt
+        volts = 120.0 + 7.5 * (z - plate) + (5.0 if speed < 100.0 else 0.0)
+        t += dt
+        velocity = step(thc, volts, t, speed=speed)
+        z += velocity * dt
+        if thc.slow_target_v is not None:
+            break
+        if i >= 400 and Lock.VELOCITY in thc.locks(t):
+            (ramp if speed > 50.0 else settle).append(velocity)
+    return ramp, settle
+
+
+def test_while_a_slow_down_settles_z_follows_the_plate_it_predicts() -> None:
+    """Before the slow target can be measured (0.2 s), Z keeps following the plate at the Z
+    speed that followed it at full feed, scaled by the speed: about 1 mm/s here. Not while
+    the speed still changes (a corner), not on a full-feed Z speed that may be noise (below
+    0.3 mm/s), and not with the prediction off."""
+    ramp, settle = _settling_velocities(2.0)
+    assert ramp == [0.0] * len(ramp)
+    assert 0.8 < max(settle) < 1.2
+    _, slow_plate = _settling_velocities(0.2)  # Z followed it at 0.2 mm/s: noise
+    assert slow_plate == [0.0] * len(slow_plate)
+    _, off = _settling_velocities(2.0, slow_settle_feedforward=0.0)
+    assert off == [0.0] * len(off)
