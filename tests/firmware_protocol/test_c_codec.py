@@ -600,8 +600,8 @@ def test_golden_frame_through_frame_view(
 def test_golden_bodies_encode_in_one_pass(c_tool: CTool) -> None:
     """dthc_encode_frame(type, seq, payload) gives every golden wire frame, from a separate
     payload and in place at DTHC_TX_PAYLOAD_OFFSET, and so do dthc_frame_seal (its exact
-    wire length) with dthc_frame_stream, and dthc_encode_in_place; a smaller cap returns 0 and writes nothing past
-    it."""
+    wire length) with dthc_frame_stream, and dthc_encode_in_place; a smaller cap returns 0
+    and writes nothing past it."""
     lines = c_tool.run(f"P {f['body_hex']}" for f in FRAMES)
     assert len(lines) == 5 * len(FRAMES), lines[:10]
     for i, f in enumerate(FRAMES):
