@@ -4,8 +4,12 @@ A pure object, called once per sample batch. Design, against the complaints user
 about the open controllers (docs/plasma-facts.md):
 
 - **Noise**: each batch goes through a median-of-three (kills the 1-2 sample spikes of
-  high-frequency start) and a first-order low-pass; a small dead band (0.3 V, a third of
-  the usual 1 V) is enough after that, so the height is held tighter.
+  high-frequency start; where it is further than ``spike_v`` from the median of five, a
+  two-sample spike, the median of five) and a first-order low-pass; a small dead band
+  (0.3 V, a third of the usual 1 V) is enough after that, so the height is held tighter.
+  In a noise burst (the mean |second difference| of those samples above ``noise_ref_v``,
+  rising within ``noise_attack_s``) the loop's command is scaled down by the square of
+  the ratio, and no slow-down target is measured.
 - **Control law**: the voltage error is turned into a height error with the material's
   V/mm slope, and Z velocity = Kp·e + Ki·∫e (PI on height). The integral term follows
   tilted and warped sheets without the steady error a P-only law keeps on a ramp.
@@ -31,8 +35,10 @@ about the open controllers (docs/plasma-facts.md):
   the cut target applies.
   While the rise settles, Z already follows the plate it predicts (that full-feed Z speed
   times the speed ratio, when above ``slow_settle_min_mm_s``), within the same bounds.
-- **Kerf and void dive**: the slope of the filtered voltage locks the THC above
-  ``void_slope_v_s`` and holds the lock for a quiet period after the spike.
+- **Kerf and void dive**: a rise of at least ``void_step_v`` at a mean slope of at least
+  ``void_slope_v_s``, on a median-of-five and mean path of its own, locks the THC; it
+  releases once the voltage is back near its level before the rise, or after a quiet
+  period (``void_lock.VoidLockDetector``). Noise bursts and spikes do not lock.
 - **Operator pause**: ``held`` locks until the program resumes (or the next cut starts).
 - **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
 While locked, Z holds (velocity 0) and the integral is frozen, never wound up.
@@ -45,6 +51,8 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
+
+from .void_lock import VoidLockDetector
 
 __all__ = ["Lock", "ThcConfig", "ThcController", "ThcOutput"]
 
@@ -64,14 +72,28 @@ class ThcConfig:
     ki_per_s2: float = 40.0
     deadband_v: float = 0.3
     lowpass_hz: float = 40.0
+    spike_v: float = 5.0  # median of three this far from the median of five: a spike
+    # Noise bursts: the loop gain is scaled by (noise_ref_v / noise)^2 above noise_ref_v,
+    # noise being the mean |second difference| of the spike-free samples over noise_tau_s.
+    noise_ref_v: float = 1.2
+    noise_tau_s: float = 0.05
+    noise_attack_s: float = 0.005  # ...rising this much faster: a burst is held at once
     slope_v_per_mm: float = 7.5  # height per volt for the error conversion
     max_speed_mm_s: float = 30.0  # M667 F overrides
     max_accel_mm_s2: float = 500.0
     anti_dive_lock_percent: float = 90.0  # G200 A; 0 disables velocity anti-dive
     anti_dive_unlock_percent: float = 99.0
+    # Void lock: a rise of void_step_v within void_step_v / void_slope_v_s seconds (on the
+    # detector's own median-of-five and mean), on void_on_samples consecutive samples.
     void_slope_v_s: float = 250.0
-    void_on_samples: int = 1  # consecutive steep samples (after the filters) before locking
-    void_hold_s: float = 0.06  # quiet time after the last steep sample before unlocking
+    void_step_v: float = 4.0
+    void_on_samples: int = 1
+    void_hold_s: float = 0.06  # no step for this long: unlock (the plate moved meanwhile)
+    void_back_v: float = 1.5  # unlock once this close to the level before the rise...
+    void_back_samples: int = 5  # ...for this many samples
+    # A rise of this much over the detector's window (not yet a void lock): Z does not go
+    # down meanwhile (a kerf's first milliseconds), up is allowed. 0: off.
+    void_guard_v: float = 2.0
     # After the machine is back at speed the arc still carries the slow-down's voltage rise
     # for some tens of ms: stay locked that much longer.
     anti_dive_unlock_hold_s: float = 0.1
@@ -113,15 +135,16 @@ class ThcOutput:
 @dataclass
 class _State:
     filtered_v: float | None = None
-    recent: deque[float] = field(default_factory=lambda: deque(maxlen=3))
-    slope_ref: deque[tuple[float, float]] = field(default_factory=lambda: deque(maxlen=8))
+    despiked: deque[float] = field(default_factory=lambda: deque(maxlen=3))
+    noise_v: float = 0.0
+    recent: deque[float] = field(default_factory=lambda: deque(maxlen=5))
     integral_mm_s: float = 0.0
     velocity_mm_s: float = 0.0
     velocity_locked: bool = True
     at_speed_since: float | None = None
     hold_rise_v: float | None = None  # the rise left when the unlock hold began
-    void_until_s: float = -1.0
-    steep_samples: int = 0
+    void: VoidLockDetector | None = None
+    void_config: ThcConfig | None = None  # the configuration ``void`` was built from
     next_sample_t: float | None = None
     last_speed_s: float = -1e9
     speed_ratio: float = 0.0
@@ -163,11 +186,23 @@ class ThcController:
         # Downward Z travel allowed while following slow-downs, over a whole cut: the
         # sequence sets half the cut height (lower is a dive); None: slow_follow_max_mm.
         self.slow_follow_max_down_mm: float | None = None
-        self._s = _State()
+        self._s = self._new_state()
+
+    def _new_state(self) -> _State:
+        cfg = self.config
+        detector = VoidLockDetector(
+            slope_v_s=cfg.void_slope_v_s,
+            step_v=cfg.void_step_v,
+            on_samples=cfg.void_on_samples,
+            hold_s=cfg.void_hold_s,
+            back_v=cfg.void_back_v,
+            back_samples=cfg.void_back_samples,
+        )
+        return _State(void=detector, void_config=cfg)
 
     def reset(self) -> None:
         """A new cut: forget filters, integral and locks; the sequence sets the target."""
-        self._s = _State()
+        self._s = self._new_state()
         self.target_v = None
         self.frozen = True
         self.held = False
@@ -231,7 +266,7 @@ class ThcController:
                 found.add(Lock.NO_SPEED)
             elif s.velocity_locked and s.slow_target_v is None:
                 found.add(Lock.VELOCITY)
-        if now_s < s.void_until_s:
+        if self._void_locked():
             found.add(Lock.VOID)
         return frozenset(found)
 
@@ -243,26 +278,31 @@ class ThcController:
         # Sample times come from the sample count, not from when the batch arrived: two
         # batches read together must not look like a steep slope.
         t = now_s - period_s * (len(samples_v) - 1)
+        if s.void_config is not self.config:  # the configuration was replaced
+            s.void, s.void_config = self._new_state().void, self.config
         expected = s.next_sample_t
         if expected is not None and abs(t - expected) < 0.05:
             t = expected
         for raw in samples_v:
             s.recent.append(raw)
             v = raw
-            if len(s.recent) == 3:
-                a, b, c = s.recent
+            if len(s.recent) >= 3:
+                a, b, c = list(s.recent)[-3:]
                 v = a + b + c - max(a, b, c) - min(a, b, c)  # median of three
+                if len(s.recent) == 5:
+                    # A two-sample spike passes the median of three, not that of five.
+                    m5 = sorted(s.recent)[2]
+                    if abs(v - m5) > cfg.spike_v:
+                        v = m5
             s.filtered_v = v if s.filtered_v is None else s.filtered_v + alpha * (v - s.filtered_v)
-            s.slope_ref.append((t, s.filtered_v))
-            t0, v0 = s.slope_ref[0]
-            if t > t0:
-                slope = (s.filtered_v - v0) / (t - t0)
-                if abs(slope) > cfg.void_slope_v_s:
-                    s.steep_samples += 1
-                    if s.steep_samples >= cfg.void_on_samples:
-                        s.void_until_s = t + cfg.void_hold_s
-                else:
-                    s.steep_samples = 0
+            d = s.despiked
+            d.append(v)
+            if len(d) == 3 and cfg.noise_tau_s > 0.0:
+                d2 = abs(d[2] - 2.0 * d[1] + d[0])
+                tau = cfg.noise_attack_s if d2 > s.noise_v else cfg.noise_tau_s
+                s.noise_v += min(1.0, period_s / max(tau, period_s)) * (d2 - s.noise_v)
+            if s.void is not None:
+                s.void.sample(raw, t, period_s)
             t += period_s
         s.next_sample_t = t
         assert s.filtered_v is not None
@@ -297,11 +337,19 @@ class ThcController:
             else:
                 error_v -= cfg.deadband_v if error_v > 0 else -cfg.deadband_v
             error_mm = error_v / cfg.slope_v_per_mm
+            gain = 1.0
+            if s.noise_v > cfg.noise_ref_v > 0.0:
+                gain = (cfg.noise_ref_v / s.noise_v) ** 2  # a noise burst: act less on it
             if not locks:
-                s.integral_mm_s += cfg.ki_per_s2 * error_mm * dt_s
-                lim = cfg.integral_limit_mm_s
-                s.integral_mm_s = max(-lim, min(lim, s.integral_mm_s))
-                command = cfg.kp_per_s * error_mm + s.integral_mm_s
+                rising = self._rising()
+                if not (rising and error_mm < 0.0):
+                    s.integral_mm_s += cfg.ki_per_s2 * gain * error_mm * dt_s
+                    lim = cfg.integral_limit_mm_s
+                    s.integral_mm_s = max(-lim, min(lim, s.integral_mm_s))
+                command = gain * (cfg.kp_per_s * error_mm + s.integral_mm_s)
+                if rising:
+                    # Perhaps a kerf's first milliseconds: never down before it is known.
+                    command = max(0.0, command)
             elif self.rise_only and locks == _DELAY_ONLY and error_mm > 0.0:
                 command = cfg.kp_per_s * error_mm  # up only, and no integral yet
             elif locks == _VELOCITY_ONLY and s.at_speed_since is not None:
@@ -372,6 +420,16 @@ class ThcController:
         error_v -= cfg.deadband_v if error_v > 0 else -cfg.deadband_v
         return cfg.kp_per_s * error_v / cfg.slope_v_per_mm
 
+    def _rising(self) -> bool:
+        void = self._s.void
+        guard = self.config.void_guard_v
+        quiet = self._s.noise_v <= self.config.noise_ref_v  # a burst rises and falls anyway
+        return void is not None and guard > 0.0 and void.rise_v >= guard and quiet
+
+    def _void_locked(self) -> bool:
+        void = self._s.void
+        return void is not None and void.locked
+
     @property
     def slow_target_v(self) -> float | None:
         """The temporary target while following a steady slow-down, else None."""
@@ -406,7 +464,8 @@ class ThcController:
         if s.slow_target_v is not None:
             return
         recent = s.slow_recent
-        if now_s < s.void_until_s:  # a void's voltage must not enter the windows
+        if self._void_locked() or s.noise_v > cfg.noise_ref_v > 0.0:
+            # A void's voltage, or a noise burst's, must not enter the windows.
             recent.clear()
             return
         steady_s = now_s - s.steady_since_s

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import random
 from dataclasses import replace
 from typing import Any
 
@@ -533,3 +534,47 @@ def test_while_a_slow_down_settles_z_follows_the_plate_it_predicts() -> None:
     assert slow_plate == [0.0] * len(slow_plate)
     _, off = _settling_velocities(2.0, slow_settle_feedforward=0.0)
     assert off == [0.0] * len(off)
+
+
+def _feed(thc: ThcController, samples: list[float], t: float) -> tuple[float, list[Any]]:
+    """Feed samples in 5-sample batches at 1 kHz; per batch (velocity, void locked)."""
+    out = []
+    for i in range(0, len(samples), 5):
+        t += 0.005
+        thc.observe_speed(100.0, 100.0, t)
+        velocity = thc.update(samples[i : i + 5], PERIOD, t, 0.005).velocity_mm_s
+        out.append((velocity, Lock.VOID in thc.locks(t)))
+    return t, out
+
+
+def test_noise_bursts_and_two_sample_spikes_neither_void_lock_nor_move_z_much() -> None:
+    """A 1 s burst of 2 V white noise and +-60 V two-sample spikes (HF start, a noisy
+    installation) on the target voltage: no void lock, and Z barely moves (spikes removed by
+    the median of five, the loop gain lowered in the burst)."""
+    rng = random.Random(7)
+    thc = running(target=128.0)
+    t, _ = _feed(thc, [128.0] * 100, 0.0)
+    samples = [128.0 + rng.gauss(0.0, 2.0) for _ in range(1000)]
+    for k in range(50, 1000, 97):  # ten two-sample spikes, either way
+        spike = 60.0 if k % 2 else -60.0
+        samples[k] = samples[k + 1] = 128.0 + spike
+    _, out = _feed(thc, samples, t)
+    assert not any(locked for _, locked in out)
+    assert max(abs(v) for v, _ in out) < 1.5  # mm/s (about 4 mm/s at full gain)
+    assert abs(sum(v * 0.005 for v, _ in out)) < 0.05  # mm of Z travel over the burst
+
+
+def test_a_kerf_spike_void_locks_at_once_and_releases_when_the_voltage_is_back() -> None:
+    """+20 V at 800 V/s (a kerf) locks within 10 ms of its start, Z goes down no more
+    than 0.02 mm; back down at 400 V/s, the lock releases once the voltage is back at its level
+    before, long before the 60 ms quiet hold would have."""
+    thc = running(target=125.0)
+    t, _ = _feed(thc, [125.0] * 50, 0.0)
+    rise = [125.0 + 0.8 * i for i in range(1, 26)]  # 800 V/s to +20 V
+    fall = [145.0 - 0.4 * i for i in range(1, 51)]  # 400 V/s back
+    t, out = _feed(thc, rise + fall + [125.0] * 100, t)
+    locked = [locked for _, locked in out]
+    assert locked.index(True) <= 1  # in the second batch at the latest
+    assert sum(v * 0.005 for v, _ in out) > -0.02
+    released = len(locked) - 1 - locked[::-1].index(True)  # last locked batch
+    assert released * 5 < 25 + 50 + 20  # released within 20 ms of the voltage being back
