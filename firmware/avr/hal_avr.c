@@ -9,7 +9,8 @@
  * pulse per carry, one period long; idle (interrupt off) while Z stands still.
  * UART0 at DTHC_UART_BAUD: RX and TX ring buffers, both served by interrupts.
  * The ADC converts a burst of ADC_BURST conversions per tick; the next tick takes their
- * mean.
+ * mean. The DTHC_ARC_VTOF build (Mega only) takes the arc voltage from a voltage-to-
+ * frequency card on T5 instead (arc_vtof.c): the ADC then only feeds hal_entropy32.
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -20,6 +21,9 @@
 #include "../hal/hal.h"
 #include "hal_avr.h"
 #include "pins.h"
+#if DTHC_ARC_VTOF
+#include "arc_vtof.h"
+#endif
 
 #define CAT_(a, b) a##b
 #define CAT(a, b) CAT_(a, b)
@@ -236,6 +240,9 @@ void hal_tick_set_period_us(uint16_t period_us)
 {
     tick_period_us = period_us;
     tick_period_counts = (uint16_t)(period_us * 2u);
+#if DTHC_ARC_VTOF
+    arc_vtof_set_period_us(period_us);
+#endif
 }
 
 void hal_tick_lock(void)
@@ -358,6 +365,8 @@ static void timer2_init(void)
 
 /* --- ADC ------------------------------------------------------------------------------------ */
 
+#if !DTHC_ARC_VTOF /* the ADC front end; the V-to-F one is arc_vtof.c */
+
 #define ADC_BURST 4 /* conversions per sample, averaged (about 420 us at 125 kHz) */
 #define ADC_BURST_LOG2 2
 #define ARC_CV_PER_COUNT_X1024 ((uint32_t)DTHC_ADC_REF_MV * DTHC_ARC_DIVIDER / 10u)
@@ -403,6 +412,7 @@ uint16_t hal_arc_raw(void)
     }
     return arc_last_cv;
 }
+#endif /* !DTHC_ARC_VTOF */
 
 static uint16_t adc_read_blocking(void)
 {
@@ -423,7 +433,11 @@ static void adc_init(void)
 
 static void adc_start(void)
 {
+#if DTHC_ARC_VTOF
+    arc_vtof_start(); /* the clock runs: the first sample's counts start here */
+#else
     ADCSRA |= _BV(ADIE);
+#endif
 }
 
 /* --- outputs and inputs ---------------------------------------------------------------------- */
@@ -549,6 +563,9 @@ void hal_init(void)
     pins_init();
     uart_init();
     adc_init();
+#if DTHC_ARC_VTOF
+    arc_vtof_init();
+#endif
     timer2_init();
 }
 

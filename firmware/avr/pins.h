@@ -15,7 +15,11 @@
  *   Z        STEP pulses on a rising edge; DIR HIGH = up (Z increasing).
  *   arc      ADC channel PIN_ARC_ADC, AVcc (5 V) reference, 10 bits; the arc voltage
  *            reaches it divided by DTHC_ARC_DIVIDER (the plasma cutter's CNC port, 1:50 by
- *            default) through an isolation amplifier of gain 1.
+ *            default) through an isolation amplifier of gain 1. Or, in the Mega's
+ *            DTHC_ARC_VTOF build (make -C firmware: build/atmega2560-vtof), the output of
+ *            an isolated voltage-to-frequency card (THCAD type) on PIN_ARC_VTOF, Timer5's
+ *            clock input T5, counted on its rising edges (firmware/avr/arc_vtof.c). The
+ *            Nano has no such option: its T1 pin (PD5, D5) is the OHMIC input.
  */
 #ifndef DTHC_PINS_H
 #define DTHC_PINS_H
@@ -52,6 +56,8 @@
 #define PIN_Z_ENABLE_PORT C
 #define PIN_Z_ENABLE_BIT 4 /* D33 */
 #define PIN_ARC_ADC 0 /* A0 */
+#define PIN_ARC_VTOF_PORT L
+#define PIN_ARC_VTOF_BIT 2 /* D47, T5: a V-to-F card's output (the DTHC_ARC_VTOF build) */
 #define DTHC_HAS_THC_UPDOWN 1
 #define DTHC_HAS_Z_LIMIT_INPUTS 1
 
@@ -80,6 +86,9 @@
 #define PIN_ARC_ADC 0 /* A0 */
 #define DTHC_HAS_THC_UPDOWN 0
 #define DTHC_HAS_Z_LIMIT_INPUTS 0
+#if defined(DTHC_ARC_VTOF) && DTHC_ARC_VTOF
+#error "pins.h: the Nano build has no V-to-F arc input (its T1 pin, PD5, is the OHMIC input)"
+#endif
 
 #else
 #error "pins.h: no pin map for this MCU (atmega2560 and atmega328p are mapped)"

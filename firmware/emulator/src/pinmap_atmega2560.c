@@ -2,10 +2,6 @@
 /* pinmap_atmega2560.c - the Mega 2560 map of firmware/avr/pins.h as a table. */
 #define DTHC_PINS_ATMEGA2560 1
 #include "pins.h"
-#ifndef PIN_ARC_VTOF_PORT
-#define PIN_ARC_VTOF_PORT L /* D47, T5 (pins.h before the V-to-F option) */
-#define PIN_ARC_VTOF_BIT 2
-#endif
 #include "pinmap.h"
 
 const struct board_pins pinmap_atmega2560 = {
