@@ -371,9 +371,10 @@ bool board_flush_samples(void)
         return true;
     }
     if (!board_queue(buf, samples_wire_len)) {
-        hal_tick_lock();
-        B.sample_overflow = true;
-        hal_tick_unlock();
+        /* Replies fill the transmit ring (a burst of queries): the batch waits for room
+         * and goes at a later poll. Only a batch still waiting when the next one is
+         * complete is lost (send_batch says SAMPLE_OVERFLOW then). */
+        return false;
     }
     samples_wire_len = 0;
     samples_ready_len = 0;

@@ -841,6 +841,32 @@ static int test_batches(void)
     return 0;
 }
 
+/* A completed batch that finds the transmit ring full (replies to a burst of queries)
+ * waits for room and goes later: no stream_seq gap, no SAMPLE_OVERFLOW. */
+static int test_batch_waits_for_room_in_the_transmit_ring(void)
+{
+    unsigned mark, i, n = 0;
+    uint16_t seq_prev = 0;
+    hello();
+    run_ms(10);
+    mark = n_out;
+    F.tx_cap = F.tx_len; /* no room for 7 ms: a batch completes meanwhile, not two */
+    run_ms(7);
+    F.tx_cap = sizeof F.tx;
+    run_ms(20);
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type != DTHC_MSG_SAMPLES) {
+            continue;
+        }
+        CHECK(!(out[i].p[18] & DTHC_STATUS_SAMPLE_OVERFLOW), "SAMPLE_OVERFLOW in batch %u", n);
+        CHECK(!n || (uint16_t)(dthc_get_u16(out[i].p) - seq_prev) == 1, "stream_seq gap");
+        seq_prev = dthc_get_u16(out[i].p);
+        n++;
+    }
+    CHECK(n >= 4, "%u batches in 27 ms", n);
+    return 0;
+}
+
 /* SET_CURRENT is refused (no CURRENT_OUT); SET_LEASE range. */
 static int test_unsupported_and_lease_range(void)
 {
@@ -931,6 +957,7 @@ static const struct {
     T(configure_out_of_range),
     T(calibration_and_filters),
     T(batches),
+    T(batch_waits_for_room_in_the_transmit_ring),
     T(batch_waits_for_a_short_frame),
     T(unsupported_and_lease_range),
     T(arc_lost),

@@ -13,10 +13,8 @@ scale per sample); a median over 200 samples is within a few tenths.
 
 from __future__ import annotations
 
-import json
 import statistics
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -32,6 +30,7 @@ from dthc_tools.emulated_board import (
     selftest_elf,
 )
 
+from .conformance_run import run_conformance
 from .frame_link import FrameLink
 
 pytestmark = pytest.mark.slow
@@ -135,15 +134,7 @@ def test_the_conformance_suite_passes_against_the_vtof_firmware(
     """Every conformance check passes against the Mega's vtof ELF (SIGUSR2 for the reset)."""
     board = vtof_board
     started = time.monotonic()
-    done = subprocess.run(
-        [sys.executable, "-m", "dthc_bridge.conformance", str(board.pty), "--yes",
-         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json"],
-        capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
-    report = json.loads(done.stdout)
-    failed = [f"{c['name']}: {c['figure']}" for c in report["checks"] if not c["passed"]]
-    assert not failed, failed
-    assert done.returncode == 0
+    report = run_conformance(board)
     print({"conformance_checks": len(report["checks"]), "s": time.monotonic() - started})
     # The suite reset the MCU (SIGUSR2): the card's edges kept coming after it.
     before = board.status()

@@ -9,12 +9,9 @@ each test opens its own session (HELLO).
 
 from __future__ import annotations
 
-import json
 import os
 import select
 import statistics
-import subprocess
-import sys
 import time
 import tty
 from collections.abc import Iterator
@@ -33,6 +30,8 @@ from dthc_tools.emulated_board import (
     relay_off_after_last_host_byte_us,
     reply_delays_us,
 )
+
+from .conformance_run import run_conformance
 
 pytestmark = pytest.mark.slow
 
@@ -86,26 +85,12 @@ def firmware_board(
         board.stop()
 
 
-def run_conformance(board: EmulatedBoard, pty: Path) -> None:
-    """``dthc-bridge conformance`` (every check, SIGUSR2 for the reset check) against the
-    board; fails naming every failed check with its figures."""
-    done = subprocess.run(
-        [sys.executable, "-m", "dthc_bridge.conformance", str(pty), "--yes",
-         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json"],
-        capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
-    report = json.loads(done.stdout)
-    failed = [f"{c['name']}: {c['figure']}" for c in report["checks"] if not c["passed"]]
-    assert not failed, failed
-    assert done.returncode == 0
-
-
 def test_the_conformance_suite_passes_against_the_mega_firmware(
     firmware_board: tuple[EmulatedBoard, Path],
 ) -> None:
     """Every conformance check passes against the Mega 2560 ELF on the emulated board."""
-    board, tmp = firmware_board
-    run_conformance(board, tmp / "board.pty")
+    board, _ = firmware_board
+    run_conformance(board)
 
 
 @pytest.fixture(scope="module")
@@ -129,8 +114,8 @@ def test_the_conformance_suite_passes_against_the_nano_firmware(
     nano_board: tuple[EmulatedBoard, Path],
 ) -> None:
     """Every conformance check passes against the ATmega328P (Nano/Uno) ELF too."""
-    board, tmp = nano_board
-    run_conformance(board, tmp / "board.pty")
+    board, _ = nano_board
+    run_conformance(board)
 
 
 STATUS_QUERIES = 50

@@ -8,29 +8,22 @@ with strict flags and ASan/UBSan, and each C test runs as its own pytest test.
 
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
+from .native_tests import build_c_tests, listed_c_tests, run_c_test
+
 ROOT = Path(__file__).resolve().parents[2]
 TEST_SOURCE = ROOT / "firmware" / "native" / "test_arc_vtof.c"
-CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g")
-SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all")
-C_TESTS = re.findall(r"^\s+T\((\w+)\),$", TEST_SOURCE.read_text(), re.MULTILINE)
+C_TESTS = listed_c_tests(TEST_SOURCE)
 
 
 @pytest.fixture(scope="module")
 def test_arc_vtof(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
-        pytest.skip("no C compiler")
-    exe = tmp_path_factory.mktemp("vtof") / "test_arc_vtof"
-    cmd = [compiler, *CFLAGS, *SANITIZE, str(TEST_SOURCE), "-lm", "-o", str(exe)]
-    subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=120)
-    return exe
+    return build_c_tests([TEST_SOURCE], tmp_path_factory.mktemp("vtof") / "test_arc_vtof", "-lm")
 
 
 def test_c_tests_are_listed() -> None:
@@ -41,11 +34,7 @@ def test_c_tests_are_listed() -> None:
 @pytest.mark.parametrize("name", C_TESTS)
 def test_vtof_conversion(test_arc_vtof: Path, name: str) -> None:
     """One C test of the count-to-centivolt conversion passes."""
-    proc = subprocess.run(
-        [str(test_arc_vtof), name], capture_output=True, text=True, timeout=30, check=False
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.strip() == f"ok {name}"
+    run_c_test(test_arc_vtof, name)
 
 
 AVR_FLAGS = ("-Os", "-std=c99", "-Wall", "-Wextra", "-Werror", "-DF_CPU=16000000UL", "-c")

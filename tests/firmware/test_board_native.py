@@ -10,12 +10,13 @@ builds are checked to fit their MCUs.
 
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+
+from .native_tests import build_c_tests, listed_c_tests, run_c_test
 
 ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
@@ -28,10 +29,7 @@ SOURCES = (
     FIRMWARE / "board" / "board_motion.c",
     ROOT / "firmware_protocol" / "c" / "dthc_protocol.c",
 )
-CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-g")
-SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all")
-# The C tests, in the order test_board.c lists them (its TESTS table: T(name)).
-C_TESTS = re.findall(r"^\s+T\((\w+)\),$", TEST_SOURCE.read_text(), re.MULTILINE)
+C_TESTS = listed_c_tests(TEST_SOURCE)
 # The Nano's 2 KB: what static RAM may take so the stack (nested tick, UART and step
 # interrupts under the main loop's deepest call: 175 B measured by the timing build) keeps
 # its room.
@@ -41,13 +39,7 @@ NANO_FLASH_B = 30 * 1024  # 32 KB less a 2 KB bootloader
 
 @pytest.fixture(scope="module")
 def test_board(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
-        pytest.skip("no C compiler")
-    exe = tmp_path_factory.mktemp("fw") / "test_board"
-    cmd = [compiler, *CFLAGS, *SANITIZE, *map(str, SOURCES), "-o", str(exe)]
-    subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=120)
-    return exe
+    return build_c_tests(SOURCES, tmp_path_factory.mktemp("fw") / "test_board")
 
 
 def test_c_tests_are_listed() -> None:
@@ -58,11 +50,7 @@ def test_c_tests_are_listed() -> None:
 @pytest.mark.parametrize("name", C_TESTS)
 def test_board_logic(test_board: Path, name: str) -> None:
     """One C test of the board logic passes (its name says what behaviour it proves)."""
-    proc = subprocess.run(
-        [str(test_board), name], capture_output=True, text=True, timeout=30, check=False
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert proc.stdout.strip() == f"ok {name}"
+    run_c_test(test_board, name)
 
 
 def _section_sizes(elf: Path) -> dict[str, int]:

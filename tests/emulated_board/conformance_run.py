@@ -1,0 +1,27 @@
+"""``dthc-bridge conformance`` against an emulated board, as a table owner runs it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+from dthc_tools.emulated_board import EmulatedBoard
+
+__all__ = ["run_conformance"]
+
+
+def run_conformance(board: EmulatedBoard) -> dict[str, Any]:
+    """Every check, SIGUSR2 for the reset check, the plate 5 mm below the start; fails
+    naming every failed check with its figures. The JSON report."""
+    done = subprocess.run(
+        [sys.executable, "-m", "dthc_bridge.conformance", str(board.pty), "--yes",
+         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json"],
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    report: dict[str, Any] = json.loads(done.stdout)
+    failed = [f"{c['name']}: {c['figure']}" for c in report["checks"] if not c["passed"]]
+    assert not failed, failed
+    assert done.returncode == 0
+    return report
