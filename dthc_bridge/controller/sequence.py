@@ -83,7 +83,22 @@ class SequenceConfig:
     # Auto voltage: the mean filtered voltage over this window, taken as soon as the machine
     # is at speed (and at least auto_voltage_after_s after arc OK), not after the THC delay.
     auto_voltage_window_s: float = 0.05
+    auto_voltage_fit_window_s: float = 0.3
     auto_voltage_after_s: float = 0.5  # from arc OK: past the start transient's peak
+    # Then, auto_voltage_fit_window_s from the window's start, the target is corrected once:
+    # the voltages since the window began, less what the THC moved Z from cut height (what
+    # a held torch would read), are fitted against the distance cut (V = a + b * d) and
+    # the target becomes a, the voltage where XY started over the probed point at cut
+    # height, so a plate drifting linearly under the held torch leaves the target. The
+    # mean is kept when the fit's plate slope exceeds auto_voltage_max_plate_slope (mm per
+    # mm), the samples span less than auto_voltage_min_span_mm, scatter beyond
+    # auto_voltage_max_residual_v, or the two halves' slopes differ by more than
+    # auto_voltage_max_slope_change (not a line: a start transient still decaying).
+    auto_voltage_fit: bool = True
+    auto_voltage_max_plate_slope: float = 0.02
+    auto_voltage_min_span_mm: float = 1.0
+    auto_voltage_max_residual_v: float = 1.0
+    auto_voltage_max_slope_change: float = 0.05  # V/mm, first half - second half
     at_speed_settle_s: float = 0.15
     dry_run: bool = False
     # Mode 0 (arc OK from voltage): window and agreement, docs/plasma-facts.md
@@ -105,7 +120,11 @@ class _Cut:
     at_speed_since: float | None = None
     thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
     auto_v: list[float] = field(default_factory=list)
+    auto_d: list[float] = field(default_factory=list)  # distance cut at each auto_v sample
     auto_v_since: float | None = None
+    distance_mm: float = 0.0  # XY travel since the cut started (from the probed point)
+    auto_mean_v: float | None = None  # the auto target before the fit refined it
+    auto_fit_done: bool = False
     relit: bool = False
     ohmic_failed: int = 0
     relay: bool = False  # the program does the start sequence; M3 is the torch relay
@@ -145,6 +164,7 @@ class CutSequence:
         self._pending_bits: dict[int, float] = {}
         self._z_mm = math.nan
         self._requested_mm_s: float | None = None
+        self._xy_speed_mm_s: float | None = None
         self._last_thc_t: float | None = None
         self._voltages: deque[float] = deque(maxlen=10)
         self._actions: list[act.Action] = []
@@ -640,6 +660,7 @@ class CutSequence:
     ) -> None:
         self.now = now
         self._z_mm = z_mm
+        self._xy_speed_mm_s = xy_speed_mm_s
         self._voltages.extend(volts)
         if requested_feed_mm_s is not None:
             # The programmed feed, not the reduced one: an M67 E3 reduction locks THC (PlasmaC).
@@ -663,6 +684,8 @@ class CutSequence:
         assert cut is not None
         cfg = self.config
         now = self.now
+        if self._xy_speed_mm_s is not None:
+            cut.distance_mm += self._xy_speed_mm_s * dt
         locks = self.thc.locks(now)
         # Anti-dive off (G200 A0): locks() never holds VELOCITY or NO_SPEED.
         at_speed = Lock.VELOCITY not in locks and Lock.NO_SPEED not in locks
@@ -688,6 +711,13 @@ class CutSequence:
         may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s
         self.thc.frozen = self.thc.target_v is None or arc_lost_running or not delay_done
         self.thc.rise_only = not arc_lost_running and not delay_done
+        if (
+            self.params.cut_voltage_v is None
+            and cut.auto_mean_v is not None
+            and not cut.auto_fit_done
+            and settled
+        ):
+            self._refine_auto_target(now)
         if may_acquire and settled and self.thc.target_v is None:
             self.thc.filter(volts, period_s, now)
             self._acquire_target(now)
@@ -739,6 +769,7 @@ class CutSequence:
         cfg = self.config
         if Lock.VOID in self.thc.locks(now):
             cut.auto_v.clear()
+            cut.auto_d.clear()
             cut.auto_v_since = None
             return
         if cut.auto_v_since is None:
@@ -746,8 +777,62 @@ class CutSequence:
         filtered = self.thc.filtered_v
         if filtered is not None:
             cut.auto_v.append(filtered)
+            cut.auto_d.append(cut.distance_mm)
         if now - cut.auto_v_since >= cfg.auto_voltage_window_s and cut.auto_v:
-            self.thc.target_v = sum(cut.auto_v) / len(cut.auto_v) + self._override_v()
+            cut.auto_mean_v = sum(cut.auto_v) / len(cut.auto_v)
+            self.thc.target_v = cut.auto_mean_v + self._override_v()
+
+    def _refine_auto_target(self, now: float) -> None:
+        """Keep sampling after the auto target was taken, the voltage less what the THC
+        moved Z from cut height (the voltage a held torch would read), and once
+        auto_voltage_fit_window_s has passed since the window began, replace the target by the
+        line's value at distance 0 (see SequenceConfig.auto_voltage_fit)."""
+        cut = self.cut
+        assert cut is not None
+        cfg = self.config
+        if not cfg.auto_voltage_fit or cut.auto_v_since is None or cut.auto_mean_v is None:
+            cut.auto_fit_done = True
+            return
+        filtered = self.thc.filtered_v
+        if filtered is not None and Lock.VOID not in self.thc.locks(now):
+            lift = self._z_mm - self._cut_z()
+            cut.auto_v.append(filtered - self.thc.config.slope_v_per_mm * lift)
+            cut.auto_d.append(cut.distance_mm)
+        if now - cut.auto_v_since < cfg.auto_voltage_fit_window_s:
+            return
+        cut.auto_fit_done = True
+        fitted = self._auto_voltage(cut.auto_d, cut.auto_v)
+        if fitted is not None and self.thc.target_v is not None:
+            self.thc.target_v += fitted - cut.auto_mean_v
+
+    def _auto_voltage(self, distances: Sequence[float], volts: Sequence[float]) -> float | None:
+        """The voltage at distance 0 by a least-squares line through (distance, volts), or
+        None where the line is implausible (see SequenceConfig.auto_voltage_fit)."""
+        cfg = self.config
+        n = len(volts)
+        mean_v = sum(volts) / n
+        if not cfg.auto_voltage_fit or n < 3:
+            return None
+        mean_d = sum(distances) / n
+        sdd = sum((d - mean_d) ** 2 for d in distances)
+        if max(distances) - min(distances) < cfg.auto_voltage_min_span_mm or sdd <= 0.0:
+            return None
+        b = sum((d - mean_d) * (v - mean_v) for d, v in zip(distances, volts, strict=True)) / sdd
+        max_b = cfg.auto_voltage_max_plate_slope * self.thc.config.slope_v_per_mm
+        if abs(b) > max_b:
+            return None
+        half = n // 2
+        b1 = _slope(distances[:half], volts[:half])
+        b2 = _slope(distances[half:], volts[half:])
+        if b1 is None or b2 is None or abs(b1 - b2) > cfg.auto_voltage_max_slope_change:
+            return None  # not a line: the start transient's decay, a bend in the plate
+        a = mean_v - b * mean_d
+        residual = math.sqrt(
+            sum((v - a - b * d) ** 2 for d, v in zip(distances, volts, strict=True)) / n
+        )
+        if residual > cfg.auto_voltage_max_residual_v:
+            return None
+        return a
 
     def tick(self, now: float) -> None:
         self.now = now
@@ -905,3 +990,16 @@ class CutSequence:
 
 def with_board_limits(config: SequenceConfig, z_min_mm: float, z_max_mm: float) -> SequenceConfig:
     return replace(config, z_min_mm=z_min_mm, z_max_mm=z_max_mm)
+
+
+def _slope(distances: Sequence[float], volts: Sequence[float]) -> float | None:
+    """The least-squares slope of volts against distances, None without a spread."""
+    n = len(volts)
+    if n < 3:
+        return None
+    mean_d = sum(distances) / n
+    mean_v = sum(volts) / n
+    sdd = sum((d - mean_d) ** 2 for d in distances)
+    if sdd <= 0.0:
+        return None
+    return sum((d - mean_d) * (v - mean_v) for d, v in zip(distances, volts, strict=True)) / sdd

@@ -403,3 +403,25 @@ def test_each_cut_limits_slow_down_following_to_half_the_cut_height_down(
     assert started.ok
     assert loop.sequence.thc.slow_follow_max_down_mm == pytest.approx(cut_height_mm / 2)
     assert loop.m5().ok
+
+
+def test_auto_voltage_extrapolates_a_linear_plate_drift_back_to_the_probed_point() -> None:
+    """The auto target's fit: voltages sampled 25-55 mm into the cut while the plate drifts
+    0.5 mm per 100 mm under the held torch (0.0375 V/mm at 7.5 V/mm), with ripple, give the
+    voltage at distance 0 (the probed point, at cut height: 122 V) within 0.3 V, where their
+    mean is 1.5 V off; a start transient still decaying (the halves' slopes differ) and a
+    plate slope beyond 2 mm per 100 mm give no fit (the mean stays)."""
+    from dthc_bridge.controller.sequence import CutSequence
+
+    sequence = CutSequence()
+    distances = [25.0 + 0.5 * i for i in range(61)]
+    ripple = [0.15 * ((-1) ** i) + 0.1 * ((i * 7) % 5 - 2) / 2 for i in range(61)]
+    drift = [122.0 - 0.0375 * d + r for d, r in zip(distances, ripple, strict=True)]
+    fitted = sequence._auto_voltage(distances, drift)
+    assert fitted is not None
+    assert fitted == pytest.approx(122.0, abs=0.3)
+    assert abs(sum(drift) / len(drift) - 122.0) > 1.0
+    decaying = [122.0 + 6.0 * 0.9 ** (d - 25.0) for d in distances]
+    assert sequence._auto_voltage(distances, decaying) is None
+    steep = [122.0 - 0.3 * d for d in distances]
+    assert sequence._auto_voltage(distances, steep) is None
