@@ -15,6 +15,7 @@ import statistics
 import time
 import tty
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
 
@@ -75,14 +76,18 @@ def firmware_board(
     if not (built / "firmware" / "Makefile").is_file():
         pytest.skip("the firmware is not there yet (no firmware/Makefile)")
     ensure_built(built, firmware=True)
-    tmp = tmp_path_factory.mktemp("fw")
-    options = HarnessOptions(record=tmp / "record.csv", build=False, stderr=tmp / "host.log")
-    board = EmulatedBoard(tmp / "board.pty", options)
-    board.start()
-    try:
+    with _board(tmp_path_factory.mktemp("fw"), "atmega2560") as started:
+        yield started
+
+
+@contextmanager
+def _board(tmp: Path, mcu: str) -> Iterator[tuple[EmulatedBoard, Path]]:
+    """The firmware's ELF for ``mcu`` on an emulated board, its record and log in ``tmp``."""
+    options = HarnessOptions(
+        mcu=mcu, record=tmp / "record.csv", build=False, stderr=tmp / "host.log"
+    )
+    with EmulatedBoard(tmp / "board.pty", options) as board:
         yield board, tmp
-    finally:
-        board.stop()
 
 
 def test_the_conformance_suite_passes_against_the_mega_firmware(
@@ -98,16 +103,8 @@ def nano_board(
     firmware_board: tuple[EmulatedBoard, Path], tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[tuple[EmulatedBoard, Path]]:
     """The ATmega328P (Nano/Uno) ELF on a second emulated board, shared by its tests."""
-    tmp = tmp_path_factory.mktemp("nano")
-    options = HarnessOptions(
-        mcu="atmega328p", record=tmp / "record.csv", build=False, stderr=tmp / "host.log"
-    )
-    board = EmulatedBoard(tmp / "board.pty", options)
-    board.start()
-    try:
-        yield board, tmp
-    finally:
-        board.stop()
+    with _board(tmp_path_factory.mktemp("nano"), "atmega328p") as started:
+        yield started
 
 
 def test_the_conformance_suite_passes_against_the_nano_firmware(
