@@ -354,6 +354,11 @@ static bool batch_waits_for_frame(void)
     return (uint16_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
 }
 
+bool board_samples_waiting(void)
+{
+    return samples_ready_len != 0;
+}
+
 /* Main loop, after the received bytes: encode a completed batch, and queue it at the next
  * call (a frame that arrived during the encode is read, and answered, first), unless a
  * short frame is arriving. */

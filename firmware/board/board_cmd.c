@@ -434,6 +434,10 @@ bool board_poll(void)
                 stack_unused = hal_stack_unused();
             }
 #endif
+            if (board_samples_waiting()) {
+                break; /* a burst of queries: the batch goes between two replies, not
+                          after all of them (the next would complete meanwhile) */
+            }
         }
     }
     /* Replies first: a batch waiting here is not time-critical, a reply is (1 ms). */
