@@ -2,48 +2,26 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Literal, Self
+from typing import Self
 
 import aiomqtt
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from .broker import BrokerSettings, MqttTls
 from .topics import Topics, filter_error
 
-__all__ = ["MqttSettings", "MqttTls"]
+__all__ = ["BrokerSettings", "MqttSettings", "MqttTls"]
 
 AUTO_WILL = "auto"  # the reference sender's availability under this board's topics
 NO_WILL = "off"
 
 
-class MqttTls(BaseModel):
-    """TLS to the broker; without ``ca_file`` the system's CA store is used."""
+class MqttSettings(BrokerSettings):
+    """The daemon's ``[mqtt]`` section: the broker (shared with every client) and the
+    gateway's own topics, rates and limits."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    ca_file: Path | None = None
-    cert_file: Path | None = Field(default=None, description="client certificate (with key_file)")
-    key_file: Path | None = None
-    insecure: bool = Field(
-        default=False, description="skip the broker's hostname check (testing only)"
-    )
-
-    @model_validator(mode="after")
-    def _cert_and_key_together(self) -> Self:
-        if (self.cert_file is None) != (self.key_file is None):
-            raise ValueError("cert_file and key_file must be given together")
-        return self
-
-
-class MqttSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    host: str = Field(default="localhost", min_length=1, max_length=253)
-    port: int = Field(default=1883, ge=1, le=65535)
-    username: str | None = Field(default=None, min_length=1, max_length=256)
-    password: SecretStr | None = None
-    tls: MqttTls | None = None
-    protocol: Literal["3.1.1", "5"] = "5"
     keepalive_s: int = Field(default=30, ge=5, le=3600)
     operation_timeout_s: float = Field(
         default=10.0, gt=0.0, le=120.0, description="CONNACK, SUBACK and PUBACK wait"
