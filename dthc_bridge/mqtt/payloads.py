@@ -176,11 +176,14 @@ def decode_request(name: str, payload: bytes, *, max_payload_bytes: int) -> Gcod
             f"payload too large: {len(payload)} bytes, at most {max_payload_bytes}"
         )
     if not payload.strip():
+        # Never "no arguments": an empty message is what a client sends by mistake (a
+        # mosquitto_pub -n, a cleared retained request delivered live), not a request.
         if name == GCODE_REQUEST:
             raise RequestRefused("empty payload: expected a JSON object with 'line'")
-        document: object = {}
-    else:
-        document = _parse_json(payload)
+        raise RequestRefused(
+            "empty payload: expected a JSON object ({} for a request without arguments)"
+        )
+    document = _parse_json(payload)
     if name == GCODE_REQUEST and isinstance(document, str):
         document = {"line": document}  # a bare JSON string is the line
     if not isinstance(document, dict):

@@ -44,15 +44,16 @@ def test_a_bare_json_string_is_a_gcode_line() -> None:
     assert request.xy_mm is None
 
 
-def test_named_requests_keep_their_arguments_and_an_empty_payload_is_no_arguments() -> None:
-    """Everything but transaction and deadline_ms is an argument for the controller."""
+def test_named_requests_keep_their_arguments_and_an_empty_object_is_no_arguments() -> None:
+    """Everything but transaction and deadline_ms is an argument for the controller; ``{}``
+    (not an empty payload, which is refused) is a request without arguments."""
     request = decode_request(
         "thc", b'{"on": true, "target_v": 118.5, "transaction": 3}', max_payload_bytes=LIMIT
     )
     assert isinstance(request, Request)
     assert request.args == {"on": True, "target_v": 118.5}
     assert request.transaction == 3
-    empty = decode_request("status", b"", max_payload_bytes=LIMIT)
+    empty = decode_request("status", b"{}", max_payload_bytes=LIMIT)
     assert isinstance(empty, Request)
     assert empty.args == {}
 
