@@ -368,6 +368,13 @@ class MqttGateway:
         seen = self._transactions.admit(reply.name, transaction, payload, reply, now_s)
         if seen.run:
             return True
+        if seen.conflict and seen.used_for not in (None, reply.name):
+            self._refuse(
+                reply,
+                f"transaction {transaction!r} was already used for a {seen.used_for!r} "
+                f"request; this is a {reply.name!r} request: use a new transaction",
+            )
+            return False
         if seen.conflict:
             self._refuse(
                 reply,
