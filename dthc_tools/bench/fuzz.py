@@ -350,8 +350,8 @@ async def _publish(stack: Stack, fuzzer: PayloadFuzzer, count: int) -> Counter[s
     """Publish the payloads; count the responses per transaction (listening all along)."""
     answers: Counter[str] = Counter()
     root = stack.root
-    async with aiomqtt.Client("127.0.0.1", stack.broker.port, identifier="dthc-fuzz",
-                              protocol=aiomqtt.ProtocolVersion.V5) as client:  # fmt: skip
+    broker = stack.broker_settings().model_copy(update={"protocol": "5"})
+    async with aiomqtt.Client(**broker.client_options(), identifier="dthc-fuzz") as client:
         await client.subscribe(f"{root}/response/#", qos=1)
 
         async def listen() -> None:

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import aiomqtt
 
+from dthc_bridge.mqtt.broker import BrokerSettings
+
 from ..demo import Stack, StackOptions, program_lines
 from .report import Goal, goals_block, proc_cpu_s
 
@@ -37,11 +39,10 @@ def _daemon_cpu_s(pid: int) -> float:
     return cpu
 
 
-async def _count_messages(port: int, counter: list[int]) -> None:
+async def _count_messages(broker: BrokerSettings, counter: list[int]) -> None:
     async with aiomqtt.Client(
-        "127.0.0.1", port, identifier=f"scale-{uuid.uuid4().hex[:6]}",
-        protocol=aiomqtt.ProtocolVersion.V311,
-    ) as client:  # fmt: skip
+        **broker.client_options(), identifier=f"scale-{uuid.uuid4().hex[:6]}"
+    ) as client:
         await client.subscribe("#", qos=0)
         async for _ in client.messages:
             counter[0] += 1
@@ -60,7 +61,7 @@ async def _scale(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
             stack.broker_shared = True
             tables.append(await stacks.enter_async_context(stack))
         counter = [0]
-        observer = asyncio.create_task(_count_messages(first.broker.port, counter))
+        observer = asyncio.create_task(_count_messages(first.broker_settings("dashboard"), counter))
         await asyncio.sleep(0.5)
         cpu0 = [_daemon_cpu_s(t.daemon.pid) for t in tables if t.daemon is not None]
         t0, messages0 = time.monotonic(), counter[0]

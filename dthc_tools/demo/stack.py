@@ -28,6 +28,7 @@ from typing import IO, Any
 import aiomqtt
 
 from dthc_bridge.controller.dialect import Dialect
+from dthc_bridge.mqtt.broker import BrokerSettings
 
 from ..emulated_board.build import MCUS
 from ..emulated_board.harness import EmulatedBoard, HarnessOptions
@@ -70,6 +71,11 @@ class StackOptions:
     # option names, e.g. {"plate-mm": 20, "warp-mm": 0.5}); its record in board-record.csv.
     board: str = "mock"
     board_model: dict[str, float] = field(default_factory=dict)
+    # A secured broker of the caller's (users, ACL, TLS), started by the caller: each client
+    # of the stack logs in with its role's settings ("daemon", "sender", "panel", and
+    # "dashboard" for the stack's own observer). Empty: the stack's own anonymous broker.
+    logins: Mapping[str, BrokerSettings] = field(default_factory=dict)
+    base_topic: str | None = None  # default: a fresh demo<hex> per stack
 
     def __post_init__(self) -> None:
         if self.board != "mock" and self.board not in MCUS:
@@ -91,6 +97,29 @@ class StackResult:
     telemetry: list[dict[str, Any]]
     events: list[dict[str, Any]]
     truth_path: Path
+
+
+def _broker_toml(broker: BrokerSettings) -> str:
+    """The ``[mqtt]`` keys of ``broker`` (the daemon's config), and ``[mqtt.tls]`` last."""
+    lines = [f"host = {json.dumps(broker.host)}", f"port = {broker.port}",
+             f"protocol = {json.dumps(broker.protocol)}"]  # fmt: skip
+    if broker.username is not None:
+        lines.append(f"username = {json.dumps(broker.username)}")
+    if broker.password_file is not None:
+        lines.append(f"password_file = {json.dumps(str(broker.password_file))}")
+    return "\n".join(lines) + "\n"
+
+
+def _tls_toml(broker: BrokerSettings) -> str:
+    """The ``[mqtt.tls]`` table of ``broker`` (empty without TLS)."""
+    if broker.tls is None:
+        return ""
+    lines = ["[mqtt.tls]"]
+    for key in ("ca_file", "cert_file", "key_file"):
+        value = getattr(broker.tls, key)
+        if value is not None:
+            lines.append(f"{key} = {json.dumps(str(value))}")
+    return "\n".join(lines) + "\n\n"
 
 
 class _Broker:
@@ -166,9 +195,10 @@ class Stack:
     def __init__(self, options: StackOptions) -> None:
         self.options = options
         self.workdir = options.workdir
-        self.base = f"demo{uuid.uuid4().hex[:6]}"
+        self.base = options.base_topic or f"demo{uuid.uuid4().hex[:6]}"
         self.broker = _Broker(options.broker, self.workdir)
-        self.broker_shared = False  # True: another Stack owns (starts and stops) the broker
+        # True: another Stack (or the caller, with logins) owns the broker
+        self.broker_shared = bool(options.logins)
         self.pty = self.workdir / "dthc0"
         self.truth = self.workdir / "truth.jsonl"
         self.mock: subprocess.Popen[str] | None = None
@@ -272,10 +302,11 @@ class Stack:
         config = self.workdir / "config.toml"
         config.write_text(
             f'[board]\nlink = "{self.pty}"\n\n'
-            f'[mqtt]\nhost = "127.0.0.1"\nport = {self.broker.port}\n'
-            f'protocol = "{self.broker.protocol}"\nbase_topic = "{self.base}"\n'
+            f"[mqtt]\n{_broker_toml(self.broker_settings('daemon'))}"
+            f'base_topic = "{self.base}"\n'
             f'board_id = "{self.options.board_id}"\ntelemetry_hz = {self.options.telemetry_hz}\n'
             f"state_poll_s = 0.05\nreconnect_initial_s = 0.1\nreconnect_max_s = 1.0\n\n"
+            f"{_tls_toml(self.broker_settings('daemon'))}"
             f'[logging]\nlevel = "info"\njson_logs = true\n'
         )
         controller = dict(self.options.controller)
@@ -299,9 +330,9 @@ class Stack:
         while True:
             try:
                 async with aiomqtt.Client(
-                    "127.0.0.1", self.broker.port, identifier=f"observer-{self.base}",
-                    protocol=aiomqtt.ProtocolVersion.V311,
-                ) as client:  # fmt: skip
+                    **self.broker_settings("dashboard").client_options(),
+                    identifier=f"observer-{self.base}",
+                ) as client:
                     for leaf in ("telemetry", "event", "board", "availability"):
                         await client.subscribe(f"{self.root}/{leaf}", qos=1)
                     async for message in client.messages:
@@ -338,10 +369,16 @@ class Stack:
         self, cls: type[DaemonClient] = DaemonClient, timeout_s: float = 60.0, role: str = "sender"
     ) -> DaemonClient:
         return cls(
-            "127.0.0.1", self.broker.port, base_topic=self.base,
-            board_id=self.options.board_id, protocol=self.broker.protocol, timeout_s=timeout_s,
-            role=role,
+            self.broker_settings(role), base_topic=self.base, board_id=self.options.board_id,
+            timeout_s=timeout_s, role=role,
         )  # fmt: skip
+
+    def broker_settings(self, role: str = "sender") -> BrokerSettings:
+        """How ``role``'s client reaches and logs in to this stack's broker."""
+        if self.options.logins:
+            return self.options.logins[role]
+        protocol = "5" if self.broker.protocol == "5" else "3.1.1"
+        return BrokerSettings(host="127.0.0.1", port=self.broker.port, protocol=protocol)
 
     async def send(
         self,

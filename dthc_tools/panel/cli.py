@@ -15,6 +15,8 @@ from pathlib import Path
 import aiomqtt
 from aiohttp import web
 
+from dthc_bridge.mqtt.broker import describe_broker_error
+from dthc_tools.broker_options import BrokerOptionError, add_broker_arguments, broker_from_args
 from dthc_tools.sender.daemon_client import DaemonClient
 
 from .history import CutHistory
@@ -32,10 +34,9 @@ def build_parser(prog: str = "dthc-bridge panel") -> argparse.ArgumentParser:
         prog=prog,
         description="The operator panel: live arc and height, THC controls, cut history.",
     )
-    parser.add_argument("--broker", default="mqtt://localhost:1883", help="mqtt://HOST:PORT")
     parser.add_argument("--base-topic", default="dthc")
     parser.add_argument("--board-id", default="table1")
-    parser.add_argument("--protocol", default="5", choices=["5", "3.1.1"])
+    add_broker_arguments(parser)
     parser.add_argument(
         "--listen", default="127.0.0.1:8080",
         help="HOST:PORT to serve on (default localhost only; anything else needs a token)",
@@ -85,12 +86,9 @@ async def serve(args: argparse.Namespace) -> int:
             f"--listen {args.listen}: beyond localhost the controls need a token "
             f"(--token-file FILE or {TOKEN_ENV})"
         )
-    broker_host, _, broker_port = args.broker.removeprefix("mqtt://").rpartition(":")
-    if not broker_host or not broker_port.isdigit():
-        raise SystemExit(f"--broker: expected mqtt://HOST:PORT, got {args.broker!r}")
     client = DaemonClient(
-        broker_host, int(broker_port), base_topic=args.base_topic, board_id=args.board_id,
-        protocol=args.protocol, timeout_s=CONTROL_TIMEOUT_S, role="panel",
+        args.broker_settings, base_topic=args.base_topic, board_id=args.board_id,
+        timeout_s=CONTROL_TIMEOUT_S, role="panel",
     )  # fmt: skip
     hub = PanelHub(client, CutHistory(args.history))
     runner = web.AppRunner(build_app(hub, token=token), access_log=None, shutdown_timeout=2.0)
@@ -123,12 +121,17 @@ def _url_host(host: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge panel") -> int:
-    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(prog)
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        args.broker_settings = broker_from_args(args)
+    except BrokerOptionError as exc:
+        parser.error(str(exc))
     try:
         return asyncio.run(serve(args))
     except aiomqtt.MqttError as exc:
-        print(f"{prog}: cannot reach the broker at {args.broker}: {exc}", file=sys.stderr)
+        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
         return 2
-    except OSError as exc:  # the port is taken, the token file is missing
+    except OSError as exc:  # the port is taken, the token or password file is missing
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2

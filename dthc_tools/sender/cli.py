@@ -12,7 +12,9 @@ from pathlib import Path
 
 import aiomqtt
 
+from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_bridge.program.options import add_dialect_options
+from dthc_tools.broker_options import BrokerOptionError, add_broker_arguments, broker_from_args
 
 from .backend import BackendError, MotionBackend, SimGantryBackend
 from .console import OperatorConsole
@@ -29,10 +31,9 @@ def build_parser(prog: str = "dthc-bridge send") -> argparse.ArgumentParser:
         prog=prog, description="Send a G-code program to the daemon (reference sender)."
     )
     parser.add_argument("program", type=Path)
-    parser.add_argument("--broker", default="mqtt://localhost:1883", help="mqtt://HOST:PORT")
     parser.add_argument("--base-topic", default="dthc")
     parser.add_argument("--board-id", default="table1")
-    parser.add_argument("--protocol", default="5", choices=["5", "3.1.1"])
+    add_broker_arguments(parser)
     parser.add_argument(
         "--backend", default="sim", choices=["sim", "grbl"],
         help="sim: the mock board's gantry; grbl: a grbl/grblHAL controller for X and Y",
@@ -89,11 +90,8 @@ async def _backend(args: argparse.Namespace) -> MotionBackend:
 
 
 async def _send(args: argparse.Namespace) -> int:
-    host, port = _host_port(args.broker, "mqtt://")
     lines = args.program.read_text().splitlines()
-    daemon = DaemonClient(
-        host, port, base_topic=args.base_topic, board_id=args.board_id, protocol=args.protocol
-    )
+    daemon = DaemonClient(args.broker_settings, base_topic=args.base_topic, board_id=args.board_id)
     backend = await _backend(args)
     sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
     console = OperatorConsole(
@@ -133,15 +131,20 @@ def _interactive() -> bool:
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -> int:
-    args = build_parser(prog).parse_args(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(prog)
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        args.broker_settings = broker_from_args(args)
+    except BrokerOptionError as exc:
+        parser.error(str(exc))
     try:
         return asyncio.run(_send(args))
     except aiomqtt.MqttError as exc:
-        print(f"{prog}: cannot reach the broker at {args.broker}: {exc}", file=sys.stderr)
+        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
         return 2
     except BackendError as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2
-    except OSError as exc:  # the program file, or the motion backend's port
+    except OSError as exc:  # the program file, a password or TLS file, the backend's port
         print(f"{prog}: {exc}", file=sys.stderr)
         return 2

@@ -16,6 +16,7 @@ import aiomqtt
 import structlog
 
 from dthc_bridge.backoff import backoff_delay_s
+from dthc_bridge.mqtt.broker import BrokerSettings
 
 __all__ = ["INVALID", "DaemonClient", "DaemonError"]
 
@@ -46,33 +47,31 @@ class DaemonClient:
 
     def __init__(
         self,
-        host: str,
-        port: int,
+        broker: BrokerSettings,
         *,
         base_topic: str = "dthc",
         board_id: str = "table1",
-        protocol: str = "5",
-        username: str | None = None,
-        password: str | None = None,
         timeout_s: float = 60.0,
         reconnect_initial_s: float = 0.2,
         reconnect_max_s: float = 5.0,
         role: str = "sender",
     ) -> None:
+        self.broker = broker
         self.root = f"{base_topic}/{board_id}"
         self.timeout_s = timeout_s
         self.reconnect_initial_s = reconnect_initial_s
         self.reconnect_max_s = reconnect_max_s
-        version = aiomqtt.ProtocolVersion.V5 if protocol == "5" else aiomqtt.ProtocolVersion.V311
         identifier = f"dthc-{role}-{uuid.uuid4().hex[:8]}"
         # The sender's own availability (its will says offline): a panel shows whether a
         # program runs, and a daemon configured with sender_will_topic stops a cut at once.
         self.availability_topic = f"{self.root}/{role}/availability"
         will = aiomqtt.Will(self.availability_topic, OFFLINE, qos=1, retain=True)
+        # Read now: a password or certificate file that cannot be used fails here, naming
+        # the file, not as a reconnect loop later.
+        options = broker.client_options()
         self._new_client = functools.partial(
-            aiomqtt.Client, host, port, protocol=version, username=username,
-            password=password, identifier=identifier, timeout=10.0, will=will,
-        )  # fmt: skip
+            aiomqtt.Client, **options, identifier=identifier, timeout=10.0, will=will
+        )
         self.role = role
         self._subscriptions: dict[str, Callable[[str, dict[str, Any]], None]] = {}
         self._client: aiomqtt.Client | None = None  # while connected and subscribed

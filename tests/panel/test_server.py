@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
+from dthc_bridge.mqtt.broker import BrokerSettings
 from dthc_tools.panel.cli import is_loopback, parse_listen, serve
 from dthc_tools.panel.controls import ControlError
 from dthc_tools.panel.history import CutHistory, CutRecorder
@@ -28,7 +29,9 @@ class RecordingHub(PanelHub):
     """A hub whose presses are recorded instead of published (no broker here)."""
 
     def __init__(self) -> None:
-        super().__init__(DaemonClient("127.0.0.1", 1, role="panel"), CutHistory())
+        super().__init__(
+            DaemonClient(BrokerSettings(host="127.0.0.1", port=1), role="panel"), CutHistory()
+        )
         self.pressed: list[tuple[str, dict[str, Any]]] = []
 
     async def control(self, name: str, args: Any) -> dict[str, Any]:

@@ -1,0 +1,112 @@
+"""The broker options every tool takes, into the daemon's own broker model.
+
+``--broker mqtt://[USER@]HOST[:PORT]`` (``mqtts://`` for TLS), ``--broker-user``,
+``--broker-password-file`` or the ``DTHC_BROKER_PASSWORD`` environment variable (never a
+password on the command line: ``ps`` shows it to every user), ``--broker-ca-file``,
+``--broker-cert-file`` and ``--broker-key-file``, ``--protocol``. They build a
+:class:`dthc_bridge.mqtt.broker.BrokerSettings`, the model the daemon's ``[mqtt]`` extends,
+so the sender, the panel and the daemon log in and verify the broker the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from pydantic import SecretStr, ValidationError
+
+from dthc_bridge.mqtt.broker import BrokerSettings, MqttTls
+
+__all__ = ["PASSWORD_ENV", "BrokerOptionError", "add_broker_arguments", "broker_from_args"]
+
+PASSWORD_ENV = "DTHC_BROKER_PASSWORD"  # noqa: S105 - the variable's name, not a password
+_PORTS = {"mqtt": 1883, "mqtts": 8883}
+
+
+class BrokerOptionError(ValueError):
+    """A broker option that cannot be used; the message names the option and the value."""
+
+
+def add_broker_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group(
+        "broker", f"the MQTT broker and this tool's login (password: a file or {PASSWORD_ENV})"
+    )
+    group.add_argument(
+        "--broker", default="mqtt://localhost:1883",
+        help="mqtt://[USER@]HOST[:PORT], or mqtts://... for TLS (default port 1883 / 8883)",
+    )  # fmt: skip
+    group.add_argument("--broker-user", metavar="NAME", help="the user name (or USER@ in --broker)")
+    group.add_argument(
+        "--broker-password-file", type=Path, metavar="FILE",
+        help=f"a file holding the password (owner-only); or the {PASSWORD_ENV} variable",
+    )  # fmt: skip
+    group.add_argument(
+        "--broker-ca-file", type=Path, metavar="FILE",
+        help="the CA that signed the broker's certificate (implies TLS)",
+    )  # fmt: skip
+    group.add_argument("--broker-cert-file", type=Path, metavar="FILE", help="client certificate")
+    group.add_argument("--broker-key-file", type=Path, metavar="FILE", help="its private key")
+    group.add_argument("--protocol", default="5", choices=["5", "3.1.1"], help="MQTT version")
+
+
+def broker_from_args(
+    args: argparse.Namespace, environ: os._Environ[str] | dict[str, str] | None = None
+) -> BrokerSettings:
+    """The broker settings the options describe; BrokerOptionError names a bad one."""
+    environ = os.environ if environ is None else environ
+    url = str(args.broker)
+    parts = urlsplit(url)
+    if parts.scheme not in _PORTS or not parts.hostname or parts.path not in ("", "/"):
+        raise BrokerOptionError(
+            f"--broker {url!r}: expected mqtt://[USER@]HOST[:PORT] or mqtts://[USER@]HOST[:PORT]"
+        )
+    if parts.password is not None:
+        raise BrokerOptionError(
+            f"--broker: a password in the URL is visible to every user in `ps`; use "
+            f"--broker-password-file FILE or the {PASSWORD_ENV} environment variable"
+        )
+    try:
+        port = parts.port or _PORTS[parts.scheme]
+    except ValueError:
+        raise BrokerOptionError(f"--broker {url!r}: the port is not a number 1-65535") from None
+    username = args.broker_user or parts.username
+    password = environ.get(PASSWORD_ENV) or None
+    if password is not None and args.broker_password_file is not None:
+        raise BrokerOptionError(
+            f"--broker-password-file and {PASSWORD_ENV} are both given: keep one"
+        )
+    tls = None
+    certificate = args.broker_cert_file or args.broker_key_file
+    if parts.scheme == "mqtts" or args.broker_ca_file is not None or certificate is not None:
+        for option, path in (
+            ("--broker-ca-file", args.broker_ca_file),
+            ("--broker-cert-file", args.broker_cert_file),
+            ("--broker-key-file", args.broker_key_file),
+        ):
+            if path is not None and not path.is_file():
+                raise BrokerOptionError(f"{option} {path}: no such file")
+        try:
+            tls = MqttTls(
+                ca_file=args.broker_ca_file,
+                cert_file=args.broker_cert_file,
+                key_file=args.broker_key_file,
+            )
+        except ValidationError:
+            raise BrokerOptionError(
+                "--broker-cert-file and --broker-key-file go together"
+            ) from None
+    try:
+        return BrokerSettings(
+            host=parts.hostname,
+            port=port,
+            username=username,
+            password=SecretStr(password) if password is not None else None,
+            password_file=args.broker_password_file,
+            tls=tls,
+            protocol=args.protocol,
+        )
+    except ValidationError as exc:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
+        raise BrokerOptionError(f"--broker {url!r}: {problems}") from None
