@@ -20,6 +20,11 @@ IDLE_STATES = frozenset({"idle", "faulted"})
 PAUSED_CONTROLS = frozenset(
     {"path_back", "path_forward", "recovery_offset", "resume_here", "restart_cut"}
 )
+# Forwarded by an online sender (running, or waiting for the operator after an error).
+VIA_SENDER = frozenset(
+    {"torch_up", "torch_down", "height_up", "height_down", "thc_on", "thc_off", "rearm"}
+)
+NO_SENDER = "no sender is online (the panel reaches the torch only through the sender)"
 
 
 class ControlError(Exception):
@@ -103,17 +108,20 @@ def _material_number(args: Mapping[str, Any]) -> dict[str, Any]:
     return {"number": args["number"]}
 
 
+# The panel reaches the torch and Z only through the sender (the broker's ACL lets the
+# panel's user send the daemon nothing that can light the torch or move Z: see
+# dthc_bridge/mqtt/roles.py); the sender forwards these to the daemon (sender/remote.py).
 CONTROLS: dict[str, Control] = {
-    "torch_up": Control("daemon", "torch_up", _fixed(volts=TORCH_STEP_V)),
-    "torch_down": Control("daemon", "torch_down", _fixed(volts=TORCH_STEP_V)),
-    "height_up": Control("daemon", "height_override", _fixed(mm=HEIGHT_STEP_MM)),
-    "height_down": Control("daemon", "height_override", _fixed(mm=-HEIGHT_STEP_MM)),
-    "thc_on": Control("daemon", "thc", _fixed(on=True)),
-    "thc_off": Control("daemon", "thc", _fixed(on=False)),
+    "torch_up": Control("sender", "torch_up", _fixed(volts=TORCH_STEP_V)),
+    "torch_down": Control("sender", "torch_down", _fixed(volts=TORCH_STEP_V)),
+    "height_up": Control("sender", "height_override", _fixed(mm=HEIGHT_STEP_MM)),
+    "height_down": Control("sender", "height_override", _fixed(mm=-HEIGHT_STEP_MM)),
+    "thc_on": Control("sender", "thc", _fixed(on=True)),
+    "thc_off": Control("sender", "thc", _fixed(on=False)),
     "cycle_start": Control("sender", "cycle_start", _none),
     "pause": Control("sender", "pause", _none),
     "stop": Control("sender", "stop", _none),
-    "rearm": Control("daemon", "rearm", _none),
+    "rearm": Control("sender", "rearm", _none),
     "path_back": Control("sender", "path_move", _path(-1.0)),
     "path_forward": Control("sender", "path_move", _path(+1.0)),
     "recovery_offset": Control("sender", "recovery_offset", _offset),
@@ -138,12 +146,12 @@ def _state_reason(name: str, view: LiveView) -> str | None:
     """Why the state does not allow ``name`` now (None: it does)."""
     progress = view.progress or {}
     sequence = view.sequence
+    if name in VIA_SENDER and not view.sender:
+        return NO_SENDER
     if name == "cycle_start":
         if view.running:  # the sender says: the daemon's state runs ahead of its progress
             waiting = progress.get("waiting_cycle_start") or progress.get("operator_paused")
             return None if waiting else "nothing waits for cycle start"
-        if sequence == "s1_wait_cycle_start":
-            return None  # no sender of ours: the daemon's pending M3 waits for it
         return "nothing waits for cycle start"
     if name == "pause":
         if not view.running:
@@ -189,10 +197,13 @@ def route(name: str, args: Mapping[str, Any], view: LiveView) -> tuple[str, str,
         if not view.sender:
             raise ControlError(f"{name}: no sender is online")
         return role, request, request_args
+    if name in VIA_SENDER:
+        if not view.sender:
+            raise ControlError(f"{name}: {NO_SENDER}")
+        return role, request, request_args
     if role == "sender" and not view.running:
-        # Without a program running there is no motion to hold: the daemon's own requests.
-        if name == "cycle_start":
-            return "daemon", "cycle_start", {}
+        # Without a program running there is no motion to hold. A stop still reaches the
+        # daemon itself (it only ever puts the torch out), whoever drives the table.
         if name == "stop":
             return "daemon", "abort", {}
         raise ControlError(f"{name}: no program runs (no sender is online)")

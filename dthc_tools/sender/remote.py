@@ -12,7 +12,8 @@ cut. The sender answers on its own topics, next to the daemon's:
 Names: ``cycle_start``, ``pause``, ``stop``, ``feed_override`` {step: "+10"|"-10"|"reset"};
 after an error (the program paused where the torch stopped, see :mod:`.recovery`):
 ``path_move`` {mm, feed_mm_min?}, ``recovery_offset`` {x_mm, y_mm, feed_mm_min?},
-``resume`` (here), ``restart`` (from the cut's start), ``quit``.
+``resume`` (here), ``restart`` (from the cut's start), ``quit``; and forwarded to the
+daemon as they are: ``torch_up``, ``torch_down``, ``height_override``, ``thc``, ``rearm``.
 Every request gets exactly one response, an unknown name or argument an error naming it.
 """
 
@@ -42,6 +43,8 @@ PROGRESS_PERIOD_S = 0.2
 """Progress goes out on change, at most this often: a program line at cutting feed takes
 longer than this, and a panel redraws at about this rate."""
 FEED_STEPS = ("+10", "-10", "reset")
+FORWARDED = ("torch_up", "torch_down", "height_override", "thc", "rearm")
+"""The daemon's requests a panel sends through the sender (dthc_bridge/mqtt/roles.py)."""
 
 
 class OperatorRemote:
@@ -68,6 +71,11 @@ class OperatorRemote:
         }
         for name in PAUSED_ACTIONS:
             self._actions[name] = functools.partial(self._paused_action, name)
+        # The panel's torch and height controls: the broker lets only the sender's user send
+        # the daemon requests that can light the torch or move Z, so the panel's go through
+        # here (the daemon checks the arguments and the state).
+        for name in FORWARDED:
+            self._actions[name] = functools.partial(self._forward, name)
         client.on_topic("sender/request/+", self._on_request)
 
     def _on_request(self, topic: str, document: dict[str, Any]) -> None:
@@ -92,6 +100,9 @@ class OperatorRemote:
         log.info("operator_request", name=name, status=response["status"],
                  error=response.get("error"))  # fmt: skip
         await self.client.publish(f"sender/response/{name}", response)
+
+    async def _forward(self, name: str, args: dict[str, Any]) -> None:
+        await self.client.request(name, **args)
 
     async def _paused_action(self, name: str, args: dict[str, Any]) -> None:
         if self.console is None:

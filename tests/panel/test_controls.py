@@ -6,7 +6,15 @@ from typing import Any
 
 import pytest
 
-from dthc_tools.panel.controls import CONTROLS, ControlError, LiveView, enabled, route
+from dthc_bridge.mqtt.roles import PANEL_REQUESTS
+from dthc_tools.panel.controls import (
+    CONTROLS,
+    NO_SENDER,
+    ControlError,
+    LiveView,
+    enabled,
+    route,
+)
 
 
 def online(state: str = "idle", **more: Any) -> LiveView:
@@ -40,13 +48,33 @@ def test_offline_disables_every_control_with_the_reason() -> None:
 
 
 def test_what_an_idle_table_allows() -> None:
-    assert allowed(online()) == {
+    assert allowed(online()) == {"material_set", "material_delete"}
+    waiting = online()
+    waiting.sender = True  # a sender waits for the operator
+    assert allowed(waiting) == {
         "torch_up", "torch_down", "height_up", "height_down", "thc_on", "material_set",
         "material_delete",
     }  # fmt: skip
     assert enabled(online())["cycle_start"] == "nothing waits for cycle start"
-    assert enabled(online())["rearm"] == "nothing to re-arm (no fault)"
-    assert "rearm" in allowed(online("faulted"))
+    assert enabled(waiting)["rearm"] == "nothing to re-arm (no fault)"
+    faulted = online("faulted")
+    assert enabled(faulted)["rearm"] == NO_SENDER
+    faulted.sender = True
+    assert "rearm" in allowed(faulted)
+
+
+def test_torch_and_height_controls_go_through_the_sender_never_to_the_daemon() -> None:
+    """The broker lets only the sender's user send requests that can light the torch or
+    move Z: every such control is routed to the sender, and none reaches the daemon."""
+    for name in ("torch_up", "torch_down", "height_up", "height_down", "thc_on", "thc_off",
+                 "rearm", "cycle_start", "pause"):  # fmt: skip
+        assert route(name, {}, running())[0] == "sender", name
+        with pytest.raises(ControlError):
+            route(name, {}, online("s1_wait_cycle_start"))  # no sender: nothing is sent
+    for name, control in CONTROLS.items():
+        if control.role == "daemon":
+            assert control.request in PANEL_REQUESTS, name
+    assert route("stop", {}, online("cutting")) == ("daemon", "abort", {})
 
 
 def test_a_running_program_allows_pause_and_stop_then_cycle_start_once_paused() -> None:
@@ -59,16 +87,15 @@ def test_a_running_program_allows_pause_and_stop_then_cycle_start_once_paused() 
     assert "cycle_start" in allowed(running(waiting_cycle_start=True))
 
 
-def test_presses_go_to_the_sender_while_it_runs_and_to_the_daemon_without_it() -> None:
+def test_presses_go_to_the_sender_while_it_runs_and_only_a_stop_to_the_daemon_without_it() -> None:
     assert route("pause", {}, running()) == ("sender", "pause", {})
     assert route("cycle_start", {}, running()) == ("sender", "cycle_start", {})
     assert route("stop", {}, online("cutting")) == ("daemon", "abort", {})
-    assert route("cycle_start", {}, online("s1_wait_cycle_start")) == ("daemon", "cycle_start", {})
     with pytest.raises(ControlError, match="pause: no program runs"):
         route("pause", {}, online())
-    assert route("torch_up", {"volts": 50}, running()) == ("daemon", "torch_up", {"volts": 1.0})
-    assert route("height_down", {}, running()) == ("daemon", "height_override", {"mm": -0.1})
-    assert route("thc_off", {}, running()) == ("daemon", "thc", {"on": False})
+    assert route("torch_up", {"volts": 50}, running()) == ("sender", "torch_up", {"volts": 1.0})
+    assert route("height_down", {}, running()) == ("sender", "height_override", {"mm": -0.1})
+    assert route("thc_off", {}, running()) == ("sender", "thc", {"on": False})
     with pytest.raises(ControlError, match="launch: no such control"):
         route("launch", {}, running())
     with pytest.raises(ControlError, match="material number: required"):

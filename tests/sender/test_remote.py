@@ -132,3 +132,20 @@ async def test_paused_motion_requests_go_to_the_console_and_answer_its_reason() 
     assert refused["error"] == "resume: the program is running (pause it, or stop it)"
     unknown = await broker.press("jump", {"transaction": 3})
     assert unknown["error"] == "jump: unknown sender request"
+
+
+@pytest.mark.parametrize(
+    ("name", "args"),
+    [("torch_up", {"volts": 1.0}), ("torch_down", {"volts": 1.0}),
+     ("height_override", {"mm": -0.1}), ("thc", {"on": False}), ("rearm", {})],
+)  # fmt: skip
+async def test_a_panels_torch_and_height_controls_are_forwarded_to_the_daemon_once(
+    name: str, args: dict[str, Any]
+) -> None:
+    """The broker lets only the sender's user send the daemon requests that can light the
+    torch or move Z; the panel's go through the sender, which sends each once, as given."""
+    broker = Broker()
+    remote_for(broker)
+    response = await broker.press(name, {**args, "transaction": "p-7"})
+    assert response == {"status": "ok", "data": {}, "transaction": "p-7"}
+    assert broker.args == [(name, args)]
