@@ -2,6 +2,9 @@
 
 Unknown keys are refused with the exact key named; bounds sit beside each field.
 Environment variables override the file: ``DTHC_MQTT__HOST=broker`` sets ``[mqtt] host``.
+An integer field takes an integer: ``port = 1883.0`` (or ``true``) is refused, not
+converted as pydantic's lax mode would, while the environment's text ``"1883"`` is read as
+the integer.
 
 One source of truth for defaults: the pure objects the daemon builds (:class:`ThcConfig`,
 :class:`SequenceConfig`, :class:`LinkTiming`, the protocol's constants) define every
@@ -16,11 +19,22 @@ objects the daemon runs with no configuration.
 
 from __future__ import annotations
 
+import re
 import tomllib
+import types
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, Union, get_args, get_origin
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, SettingsConfigDict
 
 import firmware_protocol as fp
@@ -198,6 +212,60 @@ class DaemonConfig(BaseSettings):
         # The environment overrides the file (the file's values arrive as init arguments).
         return (env_settings, init_settings)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _integers_are_integers(cls, data: object) -> object:
+        if isinstance(data, Mapping):
+            problems = _non_integers(cls, data, ())
+            if problems:
+                raise PydanticCustomError("int_not_integral", "; ".join(problems))
+        return data
+
+
+_INTEGER_TEXT = re.compile(r"\s*[+-]?[0-9][0-9_]*\s*")
+
+
+def _non_integers(
+    model: type[BaseModel], data: Mapping[str, object], where: tuple[str, ...]
+) -> list[str]:
+    """``key: must be an integer, not 1883.0`` for each integer field given a float or a
+    boolean (from TOML) or a number with a fraction or exponent (the environment's text)."""
+    problems: list[str] = []
+    for name, value in data.items():
+        field = model.model_fields.get(name) if isinstance(name, str) else None
+        if field is None:
+            continue  # an unknown key: pydantic names it
+        key = (*where, name)
+        kinds = _annotation_kinds(field.annotation)
+        if isinstance(value, Mapping):
+            for nested in kinds:
+                if isinstance(nested, type) and issubclass(nested, BaseModel):
+                    problems += _non_integers(nested, value, key)
+        elif int in kinds and float not in kinds and _not_an_integer(value, kinds):
+            problems.append(f"{'.'.join(key)}: must be an integer, not {value!r}")
+    return problems
+
+
+def _annotation_kinds(annotation: object) -> tuple[object, ...]:
+    """``int | None`` -> (int, NoneType); ``int`` -> (int,)."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        return get_args(annotation)
+    return (annotation,)
+
+
+def _not_an_integer(value: object, kinds: tuple[object, ...]) -> bool:
+    if isinstance(value, bool):
+        return bool not in kinds
+    if isinstance(value, float):
+        return True
+    if isinstance(value, str) and not _INTEGER_TEXT.fullmatch(value):
+        try:
+            float(value)
+        except ValueError:
+            return False  # not a number at all: pydantic says so
+        return True
+    return False
+
 
 class ConfigError(Exception):
     """The configuration cannot be used; the message names the file and the exact key."""
@@ -218,6 +286,6 @@ def load_config(path: Path | None) -> DaemonConfig:
         problems = []
         for error in exc.errors():
             key = ".".join(str(part) for part in error["loc"])
-            problems.append(f"{key}: {error['msg']}")
+            problems.append(f"{key}: {error['msg']}" if key else error["msg"])
         where = str(path) if path else "environment"
         raise ConfigError(f"{where}: " + "; ".join(problems)) from None
