@@ -35,7 +35,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run the daemon (systemd service)")
     run.add_argument("--config", type=Path, help="TOML configuration file")
-    check = sub.add_parser("check-config", help="validate a configuration file")
+    check = sub.add_parser(
+        "check-config", help="validate a configuration file and the files it names"
+    )
     check.add_argument("file", type=Path)
     check_program.add_arguments(
         sub.add_parser(
@@ -61,7 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _run(config_path: Path | None, log_level: str | None) -> int:
+    import structlog  # noqa: PLC0415
+
     from .config import ConfigError, load_config  # noqa: PLC0415 - pydantic only when needed
+    from .config_paths import check_paths  # noqa: PLC0415
     from .daemon import run_daemon  # noqa: PLC0415
 
     try:
@@ -69,21 +74,43 @@ def _run(config_path: Path | None, log_level: str | None) -> int:
     except ConfigError as exc:
         print(f"dthc-bridge: {exc}", file=sys.stderr)
         return 2
+    # The files it names, now: a missing CA file would otherwise be a nameless [Errno 2]
+    # on every reconnect, forever.
+    problems = check_paths(config)
+    fatal = [str(problem) for problem in problems if problem.fatal]
+    if fatal:
+        where = config_path if config_path is not None else "environment"
+        print(f"dthc-bridge: {where}: " + "; ".join(fatal), file=sys.stderr)
+        return 2
     configure_logging(
         log_level or config.logging.level,
         json=config.logging.json_logs,
         trace_frames=config.logging.trace_frames,
     )
+    for problem in problems:
+        structlog.get_logger("dthc_bridge.cli").warning(
+            "config_path_warning", key=problem.key, path=str(problem.path),
+            problem=problem.problem,
+        )  # fmt: skip
     return asyncio.run(run_daemon(config))
 
 
 def _check(path: Path) -> int:
     from .config import ConfigError, load_config  # noqa: PLC0415
+    from .config_paths import check_paths  # noqa: PLC0415
 
     try:
         config = load_config(path)
     except ConfigError as exc:
         print(f"invalid: {exc}", file=sys.stderr)
+        return 1
+    problems = check_paths(config)
+    for problem in problems:
+        if not problem.fatal:
+            print(f"warning: {path}: {problem}", file=sys.stderr)
+    fatal = [str(problem) for problem in problems if problem.fatal]
+    if fatal:
+        print(f"invalid: {path}: " + "; ".join(fatal), file=sys.stderr)
         return 1
     print(f"ok: {path} (board {config.board.link}, broker {config.mqtt.host}:{config.mqtt.port})")
     return 0
