@@ -27,6 +27,7 @@ from .controller.thc import ThcController
 from .deploy.sdnotify import SdNotifier
 from .link import LinkSupervisor
 from .materials import MaterialStore
+from .mqtt.broker import BrokerRefused
 from .mqtt.gateway import MqttGateway
 from .service import ControllerService
 
@@ -89,26 +90,42 @@ async def _run(config: DaemonConfig, notifier: SdNotifier) -> int:
     supervisor, service = build_service(config)
     gateway = MqttGateway(config.mqtt, service)
     log.info("starting", link=config.board.link, broker=f"{config.mqtt.host}:{config.mqtt.port}")
+    status = 0
     try:
-        async with asyncio.TaskGroup() as group:
-            tasks = [
-                group.create_task(supervisor.run(), name="link"),
-                group.create_task(service.run(), name="controller"),
-                group.create_task(gateway.run(), name="mqtt"),
-            ]
-            if notifier.watchdog_period_s() is not None:
-                tasks.append(group.create_task(notifier.watchdog_loop(), name="watchdog"))
-            notifier.ready()
-            notifier.status("running")
-            await stop.wait()
-            log.info("stopping")
-            notifier.stopping()
-            await asyncio.wait_for(service.shutdown(), 0.7)
-            for task in tasks:
-                task.cancel()
+        await _serve(notifier, stop, supervisor, service, gateway)
+    except* BrokerRefused as refused:
+        # One line naming what failed, exit 2 as for a bad configuration: a wrong password,
+        # user or CA is mended by the owner, not by retrying.
+        log.error("mqtt_login_refused", error=str(refused.exceptions[0]))
+        status = 2
     finally:
         for sig in (signal.SIGTERM, signal.SIGINT):
             with contextlib.suppress(Exception):
                 loop.remove_signal_handler(sig)
+    return status
+
+
+async def _serve(
+    notifier: SdNotifier,
+    stop: asyncio.Event,
+    supervisor: LinkSupervisor,
+    service: ControllerService,
+    gateway: MqttGateway,
+) -> None:
+    async with asyncio.TaskGroup() as group:
+        tasks = [
+            group.create_task(supervisor.run(), name="link"),
+            group.create_task(service.run(), name="controller"),
+            group.create_task(gateway.run(), name="mqtt"),
+        ]
+        if notifier.watchdog_period_s() is not None:
+            tasks.append(group.create_task(notifier.watchdog_loop(), name="watchdog"))
+        notifier.ready()
+        notifier.status("running")
+        await stop.wait()
+        log.info("stopping")
+        notifier.stopping()
+        await asyncio.wait_for(service.shutdown(), 0.7)
+        for task in tasks:
+            task.cancel()
     log.info("stopped")
-    return 0

@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Any, Literal, Self
 
 import aiomqtt
+from aiomqtt.exceptions import MqttConnectError
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, model_validator
 
-__all__ = ["BrokerSettings", "MqttTls", "describe_broker_error"]
+__all__ = ["BrokerRefused", "BrokerSettings", "MqttTls", "describe_broker_error", "is_refusal"]
 
 # MQTT 3.1.1 CONNACK return codes and MQTT 5 reason codes that mean "who you are" is refused.
 _V311_LOGIN_REFUSED = {4: "bad user name or password", 5: "not authorized"}
@@ -120,6 +121,22 @@ class BrokerSettings(BaseModel):
         }
 
 
+class BrokerRefused(Exception):
+    """The broker refused who we are (the login, or our trust in its certificate): trying
+    again cannot help until the configuration changes."""
+
+
+def is_refusal(exc: BaseException, broker: BrokerSettings) -> bool:
+    """The broker refused the login, or its certificate is not trusted (not: unreachable)."""
+    rc = getattr(exc, "rc", None)
+    if isinstance(exc, MqttConnectError) and rc is not None:
+        value = getattr(rc, "value", rc)
+        table = _V5_LOGIN_REFUSED if broker.protocol == "5" else _V311_LOGIN_REFUSED
+        return isinstance(value, int) and value in table
+    text = str(exc)
+    return "CERTIFICATE_VERIFY_FAILED" in text or "certificate verify failed" in text
+
+
 def describe_broker_error(exc: BaseException, broker: BrokerSettings) -> str:
     """One line naming what failed when connecting to ``broker``: the login, the TLS
     handshake (certificate), the address, or a file of ours."""
@@ -130,7 +147,10 @@ def describe_broker_error(exc: BaseException, broker: BrokerSettings) -> str:
         table = _V5_LOGIN_REFUSED if broker.protocol == "5" else _V311_LOGIN_REFUSED
         if isinstance(value, int) and value in table:
             who = f"user {broker.username!r}" if broker.username else "an anonymous client"
-            return f"the broker at {where} refused the login of {who}: {table[value]}"
+            return (
+                f"the broker at {where} refused the login of {who}: {table[value]} "
+                "(check the user name and the password)"
+            )
         return f"the broker at {where} refused the connection: {exc}"
     text = str(exc)
     if "CERTIFICATE_VERIFY_FAILED" in text or "certificate verify failed" in text:
@@ -142,7 +162,7 @@ def describe_broker_error(exc: BaseException, broker: BrokerSettings) -> str:
     if isinstance(exc, OSError) and not isinstance(exc, ConnectionError) and exc.errno is None:
         return text  # ours: a file named in the message
     if "refused" in text.lower():
-        return f"nothing accepts MQTT connections at {where} ({text})"
+        return f"cannot reach the broker at {where}: nothing accepts connections there ({text})"
     return f"cannot reach the broker at {where}: {text}"
 
 

@@ -18,7 +18,6 @@ from __future__ import annotations
 import asyncio
 import random
 import socket
-import ssl
 from collections.abc import AsyncGenerator, Callable
 from dataclasses import asdict, dataclass
 from typing import Final, TypeVar
@@ -31,6 +30,8 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from ..backoff import backoff_delay_s
 from ..controller.dialect import Dialect
+from .broker import BrokerRefused, describe_broker_error, is_refusal
+from .denials import DenialWatch
 from .outbox import Outbox, Outgoing
 from .payloads import (
     GcodeRequest,
@@ -82,6 +83,7 @@ class GatewayStats:
     outbox: int = 0
     sender_lost: int = 0
     repeated: int = 0  # a transaction seen before: answered, not executed again
+    broker_refused: int = 0  # publications and subscriptions the broker's ACL refused
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -126,12 +128,18 @@ class MqttGateway:
         self._last_board: bytes | None = None
         self._last_materials: bytes | None = None
         self._failing: set[str] = set()  # controller getters currently raising (log once)
+        self._denials = DenialWatch()  # what the broker's ACL refuses us, said once per topic
 
     # --- public ------------------------------------------------------------------------------
 
     @property
     def is_connected(self) -> bool:
         return self._connected.is_set()
+
+    @property
+    def broker_refusals(self) -> dict[str, int]:
+        """Topics the broker refused us (its ACL), with how often."""
+        return dict(self._denials.refused)
 
     async def wait_connected(self) -> None:
         """Until the gateway is connected, subscribed and has announced itself online."""
@@ -159,29 +167,17 @@ class MqttGateway:
 
     def _make_client(self) -> aiomqtt.Client:
         s = self.settings
-        tls_params = None
-        if s.tls is not None:
-            tls_params = aiomqtt.TLSParameters(
-                ca_certs=str(s.tls.ca_file) if s.tls.ca_file else None,
-                certfile=str(s.tls.cert_file) if s.tls.cert_file else None,
-                keyfile=str(s.tls.key_file) if s.tls.key_file else None,
-                cert_reqs=ssl.CERT_REQUIRED,
-            )
-        return aiomqtt.Client(
-            s.host,
-            s.port,
-            username=s.username,
-            password=s.password.get_secret_value() if s.password is not None else None,
+        client = aiomqtt.Client(
+            **s.client_options(),
             identifier=s.effective_client_id,
-            protocol=aiomqtt.ProtocolVersion.V5 if self._v5 else aiomqtt.ProtocolVersion.V311,
             will=aiomqtt.Will(self.topics.availability, OFFLINE, qos=1, retain=True),
             keepalive=s.keepalive_s,
             timeout=s.operation_timeout_s,
-            tls_params=tls_params,
-            tls_insecure=s.tls.insecure if s.tls is not None else None,
             # Without it Nagle holds each small publish until the previous one is acked.
             socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
         )
+        self._denials.watch(client)
+        return client
 
     async def _connection_loop(self) -> None:
         # A fresh Client per attempt rather than one reused Client (aiomqtt's documented
@@ -200,6 +196,10 @@ class MqttGateway:
                     await self._serve_connection(client)
             except* aiomqtt.MqttError as group:
                 error = "; ".join(str(exc) for exc in group.exceptions) or "disconnected"
+                refusal = next((e for e in group.exceptions if is_refusal(e, self.settings)), None)
+                if refusal is not None and self.stats.connects == 0:
+                    # Never logged in: a wrong password, user or CA, which no retry mends.
+                    raise BrokerRefused(describe_broker_error(refusal, self.settings)) from None
             if self._connected.is_set():
                 self._connected.clear()
                 self.stats.disconnects += 1
@@ -225,11 +225,13 @@ class MqttGateway:
                 # arrives live, so it is refused then too (on 3.1.1 the broker clears the
                 # flag on live delivery; the replay at the next subscribe is refused).
                 options = SubscribeOptions(qos=1, retainAsPublished=True)
-                await client.subscribe(self.topics.request_filter, options=options)
+                granted = await client.subscribe(self.topics.request_filter, options=options)
             else:
-                await client.subscribe(self.topics.request_filter, qos=1)
-            if self.settings.sender_will_filter is not None:
-                await client.subscribe(self.settings.sender_will_filter, qos=1)
+                granted = await client.subscribe(self.topics.request_filter, qos=1)
+            self._denials.check_subscribe(self.topics.request_filter, _codes(granted))
+            will = self.settings.sender_will_filter
+            if will is not None:
+                self._denials.check_subscribe(will, _codes(await client.subscribe(will, qos=1)))
             self.stats.connects += 1
             self._epoch += 1
             await self._announce(client)
@@ -636,6 +638,7 @@ class MqttGateway:
         self.stats.inflight = len(self._inflight)
         self.stats.outbox = len(self._outbox)
         self.stats.dropped = self._outbox.dropped
+        self.stats.broker_refused = sum(self._denials.refused.values())
         return self.stats.as_dict()
 
     @staticmethod
@@ -645,6 +648,11 @@ class MqttGateway:
             task.cancel()
         if pending:
             await asyncio.wait(pending)
+
+
+def _codes(granted: object) -> list[object]:
+    """A SUBACK's reason codes (aiomqtt returns them as a tuple or a list)."""
+    return list(granted) if isinstance(granted, tuple | list) else []
 
 
 def _v5_reply_properties(message: aiomqtt.Message) -> tuple[str | None, bytes | None]:
