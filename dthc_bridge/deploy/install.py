@@ -6,6 +6,10 @@ configuration to /etc/dthc-bridge/config.toml (only if there is none), reloads u
 systemd, and enables and starts the service. Every step is idempotent, so re-running the
 installer (after an upgrade, or with the board's real ``--serial``) is the way to update.
 
+With ``--broker-config DIR`` it also writes the table's mosquitto configuration, password
+file and ACL, and each role's password (``broker.py``), so a broker that lets only the
+sender light the torch is the same one command.
+
 ``--dry-run`` prints every step without doing it; ``--root DIR`` writes the files under a
 staging directory and runs no command. Uninstalling removes the unit and the rules and
 keeps the configuration, the state and the user unless ``--purge`` is given.
@@ -19,6 +23,7 @@ import os
 import pwd
 import shutil
 import sys
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
@@ -37,6 +42,19 @@ from .actions import (
     Step,
     WriteFile,
     run_command,
+)
+from .broker import (
+    BROKER_GROUP,
+    DEBIAN_INCLUDE_DIR,
+    BrokerOptions,
+    BrokerTls,
+    Listener,
+    broker_steps,
+    client_notes,
+    daemon_mqtt_keys,
+    existing_config_notes,
+    set_mqtt_keys,
+    validated_topics,
 )
 from .render import (
     BOARD_SYMLINK,
@@ -86,6 +104,7 @@ HIDDEN_FROM_SERVICE = ("/home", "/root", "/run/user", "/tmp", "/var/tmp")  # noq
 """Trees the unit's ProtectHome=yes and PrivateTmp=yes hide from the daemon."""
 
 UDEV_SUBSYSTEMS = ("tty", "usb", "usb-serial")
+BROKER_EXECUTABLE = "/usr/sbin/mosquitto"
 
 
 def default_bin_dir() -> Path:
@@ -101,6 +120,12 @@ class InstallOptions:
     user: str = DEFAULT_USER
     bin_dir: Path = field(default_factory=default_bin_dir)
     board: BoardIds = field(default_factory=BoardIds)
+    broker: BrokerOptions | None = None
+    """``--broker-config``: write the broker's files too."""
+    base_topic: str | None = None
+    """The topics' base; None: the existing configuration's, else "dthc"."""
+    board_id: str | None = None
+    """None: the existing configuration's, else "table1"."""
 
 
 @dataclass(frozen=True)
@@ -121,6 +146,9 @@ class HostState:
     user_in_serial_group: bool
     systemd_booted: bool
     has_udevadm: bool
+    broker_group_exists: bool = False
+    """mosquitto's group, which must read the broker's password file and ACL."""
+    broker_installed: bool = False
 
     @classmethod
     def probe(cls, user: str) -> HostState:
@@ -137,6 +165,8 @@ class HostState:
             # sd_booted(3): this directory exists only when systemd is PID 1.
             systemd_booted=Path("/run/systemd/system").is_dir(),
             has_udevadm=shutil.which("udevadm") is not None,
+            broker_group_exists=_group_exists(BROKER_GROUP),
+            broker_installed=Path(BROKER_EXECUTABLE).exists(),
         )
 
 
@@ -144,17 +174,43 @@ class HostState:
 
 
 def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
-    """Every step of an installation, in order (pure: nothing is done here)."""
+    """Every step of an installation, in order. Nothing is done here; what is read: the
+    configuration and the broker's passwords already under the root (both are kept)."""
     user = validate_account_name(options.user)
     group = user
     unit = render_unit(bin_dir=options.bin_dir, user=user, group=group)
     rules = render_udev_rules(options.board, group=group)
+    existing = _read_config(options.root)
+    topics = validated_topics(*_topics_of(options, existing))
+    config = example_config()
+    config_keys: dict[str, str | int] = {}
+    if options.base_topic is not None:
+        config_keys["base_topic"] = options.base_topic
+    if options.board_id is not None:
+        config_keys["board_id"] = options.board_id
+    if options.broker is not None:
+        config_keys.update(daemon_mqtt_keys(options.broker))
+    if config_keys:
+        config = set_mqtt_keys(config, config_keys)
     steps: list[Step] = [
         *_account_steps(user, host),
         WriteFile(UNIT_PATH, unit, 0o644),
         WriteFile(RULES_PATH, rules, 0o644),
         MakeDir(CONFIG_DIR, 0o750, group=group),
-        WriteFile(CONFIG_PATH, example_config(), 0o640, group=group, replace=False),
+        WriteFile(CONFIG_PATH, config, 0o640, group=group, replace=False),
+    ]
+    if options.broker is not None:
+        if existing is not None:
+            steps += existing_config_notes(CONFIG_PATH, existing, options.broker)
+        steps += broker_steps(
+            options.broker,
+            root=options.root,
+            topics=topics,
+            service_group=group,
+            broker_group_exists=host.broker_group_exists,
+            broker_installed=host.broker_installed,
+        )
+    steps += [
         Command(("udevadm", "control", "--reload"), "udev", if_changed=(RULES_PATH,)),
         Command(
             ("udevadm", "trigger", "--action=change", *_subsystem_matches()),
@@ -168,7 +224,42 @@ def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
         steps.append(StartService(UNIT_NAME, restart_if_changed=(UNIT_PATH,)))
     else:
         steps.append(Note(f"not started (--no-start): systemctl start {UNIT_NAME}"))
+    if options.broker is not None:
+        steps += client_notes(options.broker)
     return steps
+
+
+def _read_config(root: Path) -> dict[str, object] | None:
+    """The configuration already installed under ``root`` (None: there is none)."""
+    path = root / CONFIG_PATH.lstrip("/")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise DeployError(f"{CONFIG_PATH}: cannot be read ({exc})") from None
+
+
+def _topics_of(options: InstallOptions, existing: dict[str, object] | None) -> tuple[str, str]:
+    """(base_topic, board_id): the kept configuration's, which the daemon uses, so the ACL
+    names the daemon's own topics; an option that disagrees with it is an error."""
+    mqtt = existing.get("mqtt") if existing is not None else None
+    mqtt = mqtt if isinstance(mqtt, dict) else {}
+    chosen = []
+    for key, option, given, default in (
+        ("base_topic", "--base-topic", options.base_topic, "dthc"),
+        ("board_id", "--board-id", options.board_id, "table1"),
+    ):
+        current = mqtt.get(key) if existing is not None else None
+        if existing is not None and current is None:
+            current = default  # the daemon's default
+        if given is not None and current is not None and given != current:
+            raise DeployError(
+                f"{option} {given!r}, but {CONFIG_PATH} (kept) has {key} = {current!r}: the "
+                f"ACL must name the daemon's topics; edit the configuration or drop {option}"
+            )
+        chosen.append(str(given or current or default))
+    return chosen[0], chosen[1]
 
 
 def _subsystem_matches() -> tuple[str, ...]:
@@ -340,6 +431,49 @@ def add_install_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help=f"board USB serial number: /dev/{BOARD_SYMLINK} then names only that board",
     )
+    parser.add_argument(
+        "--base-topic",
+        default=None,
+        help='topics base of a new config and the ACL (default: the config\'s, else "dthc")',
+    )
+    parser.add_argument(
+        "--board-id",
+        default=None,
+        help="this table's id in its topics (default: the config's, else \"table1\")",
+    )
+    broker = parser.add_argument_group(
+        "broker",
+        "write mosquitto's configuration, password file and ACL for this table: a user per "
+        "role, only dthc-sender may send what lights the torch or moves Z",
+    )
+    broker.add_argument(
+        "--broker-config",
+        metavar="DIR",
+        default=None,
+        help=f"where mosquitto reads *.conf from (Debian: {DEBIAN_INCLUDE_DIR})",
+    )
+    broker.add_argument(
+        "--broker-listen",
+        metavar="HOST:PORT",
+        default="127.0.0.1:1883",
+        help="the plain MQTT listener (default 127.0.0.1:1883; 'none': TLS only)",
+    )
+    broker.add_argument("--broker-tls-cert", type=Path, metavar="FILE", help="broker certificate")
+    broker.add_argument("--broker-tls-key", type=Path, metavar="FILE", help="its private key")
+    broker.add_argument(
+        "--broker-tls-ca", type=Path, metavar="FILE", help="the CA clients verify the broker with"
+    )
+    broker.add_argument(
+        "--broker-tls-listen",
+        metavar="HOST:PORT",
+        default=":8883",
+        help="the TLS listener (default :8883, every address)",
+    )
+    broker.add_argument(
+        "--broker-require-client-cert",
+        action="store_true",
+        help="TLS clients must show a certificate signed by --broker-tls-ca",
+    )
 
 
 def add_uninstall_arguments(parser: argparse.ArgumentParser) -> None:
@@ -356,6 +490,7 @@ def run_install(args: argparse.Namespace) -> int:
     """``install-service`` from parsed arguments (see :func:`add_install_arguments`)."""
     try:
         board = BoardIds.parse(args.vid, args.pid, args.serial)
+        broker = _broker_options(args)
     except DeployError as exc:
         sys.stderr.write(f"dthc-bridge install-service: error: {exc}\n")
         return 2
@@ -366,8 +501,37 @@ def run_install(args: argparse.Namespace) -> int:
         user=args.user,
         bin_dir=default_bin_dir() if args.bin_dir is None else args.bin_dir.absolute(),
         board=board,
+        broker=broker,
+        base_topic=args.base_topic,
+        board_id=args.board_id,
     )
     return install_service(options)
+
+
+def _broker_options(args: argparse.Namespace) -> BrokerOptions | None:
+    tls_files = (args.broker_tls_cert, args.broker_tls_key, args.broker_tls_ca)
+    if args.broker_config is None:
+        if any(f is not None for f in tls_files) or args.broker_require_client_cert:
+            raise DeployError("the --broker-tls-* options need --broker-config DIR")
+        return None
+    tls = None
+    if any(f is not None for f in tls_files):
+        if any(f is None for f in tls_files):
+            raise DeployError("TLS needs --broker-tls-cert, --broker-tls-key and --broker-tls-ca")
+        cert, key, ca = (f.absolute() for f in tls_files)
+        tls = BrokerTls(
+            cert_file=cert,
+            key_file=key,
+            ca_file=ca,
+            listen=Listener.parse(args.broker_tls_listen, "--broker-tls-listen"),
+            require_client_cert=args.broker_require_client_cert,
+        )
+    elif args.broker_require_client_cert:
+        raise DeployError("--broker-require-client-cert needs the --broker-tls-* files")
+    listen = None
+    if args.broker_listen.strip().lower() not in ("none", "off", ""):
+        listen = Listener.parse(args.broker_listen, "--broker-listen")
+    return BrokerOptions(config_dir=args.broker_config, listen=listen, tls=tls)
 
 
 def run_uninstall(args: argparse.Namespace) -> int:
