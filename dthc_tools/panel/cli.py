@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import ipaddress
 import os
 import signal
 import sys
@@ -19,9 +18,18 @@ from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_tools.broker_options import BrokerOptionError, add_broker_arguments, broker_from_args
 from dthc_tools.sender.daemon_client import DaemonClient
 
+from .connections import start_guarded_site
 from .history import CutHistory
+from .http_guard import (
+    HostAllowList,
+    TokenRefused,
+    check_token,
+    host_name,
+    is_loopback,
+    read_token_file,
+)
 from .hub import PanelHub
-from .server import build_app
+from .server import PanelLimits, build_app
 
 __all__ = ["build_parser", "main"]
 
@@ -43,8 +51,15 @@ def build_parser(prog: str = "dthc-bridge panel") -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument(
         "--token-file", type=Path,
-        help=f"a file holding the token controls need (or the {TOKEN_ENV} environment "
-        "variable); required when listening beyond localhost",
+        help=f"a file (mode 600) holding the panel's token (or the {TOKEN_ENV} environment "
+        "variable), at least 128 random bits; required beyond localhost, where every "
+        "endpoint needs it",
+    )  # fmt: skip
+    parser.add_argument(
+        "--allow-host", action="append", default=[], type=_allowed_name, metavar="NAME",
+        help="a Host name the panel is reached by, besides localhost and the --listen host "
+        "(repeatable; e.g. the shop PC's name, or a reverse proxy's); any other Host is "
+        "answered 421, and a name beyond localhost needs a token",
     )  # fmt: skip
     parser.add_argument(
         "--history", type=Path, help="keep the cut history in this file (JSON lines)"
@@ -60,38 +75,52 @@ def parse_listen(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False  # a name: it may resolve to anything
+def _allowed_name(text: str) -> str:
+    """An --allow-host: a name or address, without scheme or port."""
+    name = host_name(text)
+    bare = text.strip().lower().strip("[]").rstrip(".")
+    if not name or "/" in text or name != bare:
+        raise argparse.ArgumentTypeError(f"expected a host name without port, got {text!r}")
+    return name
 
 
 def _token(args: argparse.Namespace) -> str | None:
+    """The token (TokenRefused: too short, or a file others may read; OSError: no file)."""
     if args.token_file is not None:
-        token = str(args.token_file.read_text()).strip()
-        if not token:
-            raise SystemExit(f"--token-file {args.token_file}: the file is empty")
-        return token
-    return os.environ.get(TOKEN_ENV, "") or None
+        return read_token_file(args.token_file)
+    token = os.environ.get(TOKEN_ENV, "").strip()
+    return check_token(token, TOKEN_ENV) if token else None
+
+
+def _access(args: argparse.Namespace, host: str) -> tuple[HostAllowList, str | None]:
+    """The Host names served and the token; TokenRefused when the panel must not start."""
+    allowed = HostAllowList.build(host, args.allow_host)
+    token = _token(args)
+    if token is None and not (is_loopback(host) and allowed.loopback_only):
+        beyond = [n for n in sorted(allowed.names) if not is_loopback(n)] or [host]
+        raise TokenRefused(
+            f"--listen {args.listen}: beyond localhost ({', '.join(beyond)}) every endpoint "
+            f"needs a token (--token-file FILE or {TOKEN_ENV})"
+        )
+    return allowed, token
 
 
 async def serve(args: argparse.Namespace) -> int:
     host, port = parse_listen(args.listen)
-    token = _token(args)
-    if token is None and not is_loopback(host):
-        raise SystemExit(
-            f"--listen {args.listen}: beyond localhost the controls need a token "
-            f"(--token-file FILE or {TOKEN_ENV})"
-        )
+    try:
+        allowed, token = _access(args, host)
+    except TokenRefused as exc:  # one line, before anything starts
+        print(f"dthc-bridge panel: {exc}", file=sys.stderr)
+        return 2
     client = DaemonClient(
         args.broker_settings, base_topic=args.base_topic, board_id=args.board_id,
         timeout_s=CONTROL_TIMEOUT_S, role="panel",
     )  # fmt: skip
     hub = PanelHub(client, CutHistory(args.history))
-    runner = web.AppRunner(build_app(hub, token=token), access_log=None, shutdown_timeout=2.0)
+    limits = PanelLimits()
+    app = build_app(hub, token=token, allowed=allowed, limits=limits)
+    runner = web.AppRunner(app, access_log=None, shutdown_timeout=2.0)
+    server: asyncio.Server | None = None
     await runner.setup()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -99,10 +128,9 @@ async def serve(args: argparse.Namespace) -> int:
         loop.add_signal_handler(sig, stop.set)
     try:
         async with client.connected():
-            site = web.TCPSite(runner, host, port)
-            await site.start()
+            server, _pool = await start_guarded_site(runner, host, port, limits.connections)
             links = asyncio.create_task(hub.watch_links())
-            bound = runner.addresses[0] if runner.addresses else (host, port)
+            bound = server.sockets[0].getsockname() if server.sockets else (host, port)
             print(f"PANEL http://{_url_host(host)}:{bound[1]}/", flush=True)
             try:
                 await stop.wait()
@@ -112,7 +140,11 @@ async def serve(args: argparse.Namespace) -> int:
                 with contextlib.suppress(asyncio.CancelledError):
                     await links
     finally:
+        if server is not None:
+            server.close()  # no new connections; the runner ends those still open
         await runner.cleanup()
+        if server is not None:
+            await server.wait_closed()
     return 0
 
 

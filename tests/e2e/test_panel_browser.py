@@ -297,3 +297,51 @@ async def _steer(
         "browser_cpu_percent": round(100.0 * (cpu1 - cpu0) / (t1 - t0), 1),
         "screenshot": str(shot),
     }
+
+
+async def test_the_page_asks_for_the_token_then_streams_with_its_cookie(browser: Browser) -> None:
+    """A panel with a token (in-process, no broker): the page shows the token form and no
+    stream; a wrong token is refused on the page; the right one logs in, and the stream, the
+    history and a control press then carry the cookie the login set."""
+    from aiohttp import web
+
+    from dthc_tools.panel.connections import start_guarded_site
+    from dthc_tools.panel.server import PanelLimits, build_app
+    from tests.panel.test_server import TOKEN, RecordingHub
+
+    hub = RecordingHub()
+    limits = PanelLimits()
+    runner = web.AppRunner(build_app(hub, token=TOKEN, limits=limits), shutdown_timeout=0.5)
+    await runner.setup()
+    server, _ = await start_guarded_site(runner, "127.0.0.1", 0, limits.connections)
+    url = f"http://127.0.0.1:{server.sockets[0].getsockname()[1]}/"
+    try:
+        await browser.call(browser.driver.get, url)
+        await browser.until("!document.querySelector('#token-form').hidden", 10)
+        assert await browser.js("return document.querySelector('#banner').textContent;") == (
+            "This panel needs its token"
+        )
+        assert await browser.js("return window.panelStats.views;") == 0
+        for given, shown in (("wrong", "the panel token is wrong"), (TOKEN, None)):
+            await browser.js(
+                "document.querySelector('#token').value = arguments[0];"
+                "document.querySelector('#token-form').requestSubmit();", given,
+            )  # fmt: skip
+            if shown is not None:
+                await browser.until(
+                    f"document.querySelector('#answer').textContent === '{shown}'", 5
+                )
+        await browser.until("window.panelStats.views > 0", 10)
+        await browser.until("document.querySelector('#link-panel').className === 'ok'", 5)
+        assert await browser.js("return document.querySelector('#token-form').hidden;")
+        assert await browser.js("return document.cookie;") == ""  # HttpOnly: not for scripts
+        answer = await browser.js(
+            "return fetch('/api/control/torch_up', {method: 'POST', body: '{}', headers: "
+            "{'Content-Type': 'application/json', 'X-DTHC-Panel': '1'}}).then((r) => r.status);"
+        )
+        assert answer == 200
+        assert hub.pressed == [("torch_up", {})]
+    finally:
+        server.close()
+        await runner.cleanup()
+        await server.wait_closed()

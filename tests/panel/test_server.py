@@ -14,15 +14,17 @@ import pytest
 from aiohttp.test_utils import TestClient, TestServer
 
 from dthc_bridge.mqtt.broker import BrokerSettings
-from dthc_tools.panel.cli import is_loopback, parse_listen, serve
+from dthc_tools.panel.cli import parse_listen, serve
 from dthc_tools.panel.controls import ControlError
 from dthc_tools.panel.history import CutHistory, CutRecorder
+from dthc_tools.panel.http_guard import is_loopback
 from dthc_tools.panel.hub import PanelHub
 from dthc_tools.panel.server import build_app
 from dthc_tools.sender.daemon_client import DaemonClient
 from tests.panel.test_history import g200_s1_cut
 
 HEADERS = {"Content-Type": "application/json", "X-DTHC-Panel": "1"}
+TOKEN = "Vh3k9qT1xZ7mP2wR8sY4bN6cJ0fL5aDe"  # noqa: S105 - a test's token, 32 of base64url
 
 
 class RecordingHub(PanelHub):
@@ -103,22 +105,53 @@ async def test_no_get_changes_state(client: TestClient[Any, Any], hub: Recording
 
 
 async def test_a_token_is_required_when_configured(hub: RecordingHub) -> None:
-    client = await client_for(hub, token="s3cret-token")  # noqa: S106 - a test's token
+    """With a token every endpoint but the page shell needs it, as a Bearer header or as
+    the cookie the page's login POST gets."""
+    client = await client_for(hub, token=TOKEN)
     try:
-        view = await (await client.get("/api/view")).json()
+        assert (await client.get("/")).status == 200  # the shell: no table data
+        assert (await client.get("/static/panel.js")).status == 200
+        for path in ("/api/view", "/api/cuts", "/api/cuts/1", "/api/cuts/1.csv", "/events"):
+            assert (await client.get(path)).status == 401, path
+        bearer = {"Authorization": f"Bearer {TOKEN}"}
+        view = await (await client.get("/api/view", headers=bearer)).json()
         assert view["token_required"] is True
-        for given in ("", "Bearer wrong", "s3cret-token"):
+        for given in ("", "Bearer wrong", TOKEN, f"Basic {TOKEN}"):
             response = await client.post(
                 "/api/control/stop", data="{}", headers={**HEADERS, "Authorization": given}
             )
             assert response.status == 401
         assert hub.pressed == []
-        good = await client.post(
-            "/api/control/stop",
-            data="{}",
-            headers={**HEADERS, "Authorization": "Bearer s3cret-token"},
-        )
+        good = await client.post("/api/control/stop", data="{}", headers={**HEADERS, **bearer})
         assert good.status == 200
+        assert hub.pressed == [("stop", {})]
+    finally:
+        await client.close()
+
+
+async def test_the_page_logs_in_once_and_its_cookie_opens_every_endpoint(
+    hub: RecordingHub,
+) -> None:
+    """The login POST answers the cookie (HttpOnly, SameSite=Strict, not the token itself);
+    a wrong token gets none; the cookie then opens reads, the stream and controls."""
+    client = await client_for(hub, token=TOKEN)
+    try:
+        wrong = await client.post("/api/login", json={"token": "x" * 40}, headers=HEADERS)
+        assert wrong.status == 401
+        assert "dthc_panel" not in wrong.cookies
+        assert (await client.get("/api/view")).status == 401
+        login = await client.post("/api/login", json={"token": TOKEN}, headers=HEADERS)
+        assert login.status == 200
+        cookie = login.headers["Set-Cookie"]
+        assert "HttpOnly" in cookie
+        assert "SameSite=Strict" in cookie
+        assert TOKEN not in cookie
+        assert (await client.get("/api/view")).status == 200
+        stream = await client.get("/events")
+        assert stream.status == 200
+        stream.close()
+        pressed = await client.post("/api/control/stop", data="{}", headers=HEADERS)
+        assert pressed.status == 200
         assert hub.pressed == [("stop", {})]
     finally:
         await client.close()
@@ -171,15 +204,42 @@ def test_listen_addresses() -> None:
     assert not is_loopback("shop-pc.local")
 
 
-async def test_listening_beyond_localhost_needs_a_token(tmp_path: Path) -> None:
+def _serve_args(**changes: Any) -> argparse.Namespace:
     args = argparse.Namespace(
-        listen="0.0.0.0:8080", token_file=None, broker="mqtt://x:1",
+        listen="0.0.0.0:8080", token_file=None, allow_host=[], broker="mqtt://x:1",
         base_topic="dthc", board_id="t", protocol="5", history=None,
     )  # fmt: skip
-    with pytest.raises(SystemExit, match="beyond localhost the controls need a token"):
-        await serve(args)
-    empty = tmp_path / "token"
-    empty.write_text("\n")
-    args.token_file = empty
-    with pytest.raises(SystemExit, match="the file is empty"):
-        await serve(args)
+    vars(args).update(changes)
+    return args
+
+
+async def test_listening_beyond_localhost_needs_a_token(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Refused at start, one line on stderr and exit 2: no token beyond localhost (listening
+    there, or an --allow-host name there), an empty one, a short one, a file others read."""
+    monkeypatch.delenv("DTHC_PANEL_TOKEN", raising=False)
+    token_file = tmp_path / "token"
+    token_file.write_text("\n")
+    token_file.chmod(0o600)
+    short = "0123456789abcdef0123456789abcde"  # 31 hex digits: 124 bits
+    cases = [
+        (_serve_args(), "beyond localhost (0.0.0.0) every endpoint needs a token"),
+        (
+            _serve_args(listen="127.0.0.1:8080", allow_host=["shop-pc.local"]),
+            "beyond localhost (shop-pc.local) every endpoint needs a token",
+        ),
+        (_serve_args(token_file=token_file), "the token is empty"),
+        (_serve_args(token_file=token_file, short=short), "about 124 bits (31 characters)"),
+        (_serve_args(token_file=token_file, mode=0o640), "mode 0640 lets group or others"),
+        (_serve_args(env=short), "DTHC_PANEL_TOKEN: the token holds about 124 bits"),
+    ]
+    for args, reason in cases:
+        token_file.write_text(f"{vars(args).pop('short', '')}\n")
+        token_file.chmod(vars(args).pop("mode", 0o600))
+        if "env" in vars(args):
+            monkeypatch.setenv("DTHC_PANEL_TOKEN", vars(args).pop("env"))
+        assert await serve(args) == 2
+        err = capsys.readouterr().err
+        assert reason in err, err
+        assert err.count("\n") == 1

@@ -7,7 +7,7 @@ const MAX_POINTS = 2000;
 const points = []; // telemetry, oldest first
 let view = null; // the panel's live view (links, state, progress, controls enabled)
 let streamUp = false;
-let token = sessionStorage.getItem("dthc-panel-token") || "";
+let needToken = false; // the panel answered 401: the token form is shown until a login
 let editing = null; // the material number being edited, or "new"
 let drawPending = false;
 
@@ -20,10 +20,41 @@ const fmt = (value, digits, unit) =>
 
 // --- the stream -----------------------------------------------------------------------------
 
+// The view first: a 401 asks for the token (the login POST answers a cookie, which the
+// stream, the history and the controls then carry; an EventSource cannot send a header).
+async function start() {
+  let response;
+  try {
+    response = await fetch("/api/view");
+  } catch (error) {
+    setTimeout(start, 2000);
+    return;
+  }
+  needToken = response.status === 401;
+  render();
+  if (needToken) { $("#token").focus(); return; }
+  connect();
+  loadHistory();
+}
+
+async function login(event) {
+  event.preventDefault();
+  const answer = await post("/api/login", { token: $("#token").value.trim() }, "login");
+  $("#token").value = "";
+  if (answer.ok) start();
+  else showAnswer(answer, "login");
+}
+
 function connect() {
   const source = new EventSource("/events");
   source.onopen = () => { streamUp = true; render(); };
-  source.onerror = () => { streamUp = false; render(); }; // EventSource reconnects by itself
+  source.onerror = () => {
+    streamUp = false;
+    render();
+    // A network error is retried by the EventSource itself; a refusal (401: the token
+    // changed, 503: too many pages) closes it: look again in a while.
+    if (source.readyState === EventSource.CLOSED) setTimeout(start, 5000);
+  };
   source.onmessage = (message) => {
     const { kind, data } = JSON.parse(message.data);
     if (kind === "telemetry") onTelemetry(data);
@@ -59,6 +90,7 @@ function setLink(id, ok, text, idle = false) {
 }
 
 function offlineReason() {
+  if (needToken) return "This panel needs its token";
   if (!streamUp) return "Panel connection lost: reconnecting…";
   if (!view) return "Waiting for the panel…";
   if (!view.broker) return "Broker unreachable: controls are disabled";
@@ -77,7 +109,7 @@ function render() {
   const banner = offlineReason();
   $("#banner").hidden = !banner;
   $("#banner").textContent = banner;
-  $("#token-form").hidden = !(v.token_required || token);
+  $("#token-form").hidden = !needToken;
 
   const state = v.state || {};
   $("#r-state").textContent = state.state || "-";
@@ -158,21 +190,27 @@ function renderParams(state) {
 
 // --- controls -------------------------------------------------------------------------------
 
-async function press(name, args = {}) {
+async function post(path, args, name) {
   const headers = { "Content-Type": "application/json", "X-DTHC-Panel": "1" };
-  if (token) headers.Authorization = `Bearer ${token}`;
-  let answer;
   try {
-    const response = await fetch(`/api/control/${name}`, {
+    const response = await fetch(path, {
       method: "POST", headers, body: JSON.stringify(args), credentials: "same-origin",
     });
-    answer = await response.json();
+    return await response.json();
   } catch (error) {
-    answer = { ok: false, error: `${name}: the panel did not answer (${error})` };
+    return { ok: false, error: `${name}: the panel did not answer (${error})` };
   }
+}
+
+function showAnswer(answer, name) {
   const line = $("#answer");
   line.className = answer.ok ? "ok" : "error";
   line.textContent = answer.ok ? `${name.replace("_", " ")}: done` : answer.error;
+}
+
+async function press(name, args = {}) {
+  const answer = await post(`/api/control/${name}`, args, name);
+  showAnswer(answer, name);
   return answer;
 }
 
@@ -180,12 +218,7 @@ function bindControls() {
   for (const button of document.querySelectorAll("[data-control]")) {
     button.addEventListener("click", () => press(button.dataset.control, argsFor(button)));
   }
-  $("#token-form").addEventListener("submit", (event) => event.preventDefault());
-  $("#token").value = token;
-  $("#token").addEventListener("change", () => {
-    token = $("#token").value.trim();
-    sessionStorage.setItem("dthc-panel-token", token);
-  });
+  $("#token-form").addEventListener("submit", login);
   $("#material-add").addEventListener("click", () => editMaterial("new"));
   $("#material-cancel").addEventListener("click", () => { editing = null; $("#material-form").hidden = true; });
   $("#material-form").addEventListener("submit", saveMaterial);
@@ -361,5 +394,4 @@ function escapeHtml(text) {
 
 bindControls();
 render();
-connect();
-loadHistory();
+start();
