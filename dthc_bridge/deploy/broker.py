@@ -13,8 +13,8 @@ Debian's mosquitto.conf includes) writes
   bits) and kept by every re-install; the daemon's root:dthc 0640, the others root:root 0600.
 
 The password file and the ACL are root:mosquitto 0640: Debian's mosquitto 2 reads them
-after dropping to its own user (root:root 0600 stops it: "Unable to open pwfile"), and
-a world-readable file makes mosquitto 2.0.16 and later warn.
+after dropping to its own user (root:root 0600 stops it: "Unable to open pwfile"); later
+releases also warn about a world-readable file, or one its user does not own (and load it).
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ __all__ = [
     "broker_steps",
     "client_notes",
     "daemon_mqtt_keys",
+    "example_files",
     "existing_config_notes",
     "hash_password",
     "password_path",
@@ -459,6 +460,21 @@ def existing_config_notes(
         notes.append(Note(f"and in its [mqtt.tls] section: {tls}"))
     notes.append(Note("then: systemctl restart dthc-bridge (never during a cut)"))
     return notes
+
+
+# ------------------------------------------------------------------------ the examples
+
+
+def example_files() -> dict[str, str]:
+    """systemd/'s broker examples for the default topics and users, the conf with the
+    default plain listener and a TLS one. A test holds the committed files to these."""
+    root = Topics.for_board("dthc", "table1").root
+    certs = Path("/etc/mosquitto/certs")
+    tls = BrokerTls(certs / "broker.crt", certs / "broker.key", certs / "ca.crt")
+    return {
+        "mosquitto-dthc.conf.example": render_broker_conf(BrokerOptions(tls=tls), root),
+        "mosquitto-acl.example": render_acl(root, dict(BROKER_USERS)),
+    }
 
 
 # ------------------------------------------------------------------------- for the tests

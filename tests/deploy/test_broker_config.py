@@ -23,6 +23,7 @@ from dthc_bridge.deploy.broker import (
     BrokerTls,
     Listener,
     broker_steps,
+    example_files,
     hash_password,
     password_path,
     render_broker_conf,
@@ -378,3 +379,21 @@ def test_write_broker_files_for_an_end_to_end_test(tmp_path: Path) -> None:
     assert render_broker_conf(files.options, "dthc/table1") == files.conf.read_text()
     again = write_broker_files(tmp_path, files.options)
     assert again.password(Role.SENDER) == files.password(Role.SENDER)
+
+
+def test_systemd_examples_are_what_the_installer_writes() -> None:
+    """systemd/mosquitto-acl.example is render_acl for the default topics and users, and
+    systemd/mosquitto-dthc.conf.example the conf for the default listener plus TLS."""
+    systemd = Path(__file__).resolve().parents[2] / "systemd"
+    for name, text in example_files().items():
+        assert (systemd / name).read_text() == text, (
+            f"systemd/{name} differs from what the installer writes; regenerate it: "
+            ".venv/bin/python -c 'from pathlib import Path; from dthc_bridge.deploy.broker "
+            'import example_files; [Path("systemd", n).write_text(t) for n, t in '
+            "example_files().items()]'"
+        )
+    assert example_files()["mosquitto-acl.example"] == render_acl(
+        "dthc/table1",
+        {Role.DAEMON: "dthc-daemon", Role.SENDER: "dthc-sender", Role.PANEL: "dthc-panel",
+         Role.DASHBOARD: "dthc-dashboard"},
+    )  # fmt: skip
