@@ -108,7 +108,9 @@ class BoardSession:
             if not pending.future.done():
                 pending.future.set_exception(error)
         self._pending.clear()
-        if self._transport is not None and self._transport.is_open:
+        if self._transport is None:
+            return  # never opened: nothing was lost (the opener's error says why)
+        if self._transport.is_open:
             self._loop.create_task(self._transport.close(), name="transport-close")
         (log.info if expected else log.warning)("link_lost", url=self.url, reason=str(error))
 

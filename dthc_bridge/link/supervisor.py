@@ -2,7 +2,11 @@
 
 A link fault never crashes the process: the session fails every waiter with one exception,
 the board is reported offline, and reconnection retries with capped, jittered backoff,
-including while the device path does not exist yet (USB cable still unplugged).
+including while the device path does not exist yet (USB cable still unplugged). A device
+that cannot be opened is said once per distinct OS error (``board_link_unavailable
+path=/dev/dthc0 error="[Errno 2] No such file or directory"``), not at every retry, and the
+board stays offline with that reason ("cannot open /dev/dthc0: No such file or directory")
+while the retries go on, instead of flickering through ``connecting``.
 
 The supervisor is also the link's boundary towards the layers above: they register
 listeners (samples, reports, state changes, handler errors), receive board data stamped
@@ -28,7 +32,7 @@ import structlog
 import firmware_protocol as fp
 
 from ..backoff import backoff_delay_s
-from ..transport import TransportError, TransportOpener, open_transport
+from ..transport import LinkUnavailable, TransportError, TransportOpener, open_transport
 from .clock import BoardTimeline
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
 from .session import BoardSession
@@ -100,8 +104,10 @@ class LinkSupervisor:
         self._last_boot_id: int | None = None
         self._reboot_announced = False  # this reboot was reported when its session ended
         self.state = LinkState.OFFLINE
+        self.reason = ""
         self.session: BoardSession | None = None
         self.last_error: str = ""
+        self._unavailable: str | None = None  # the open failure last logged, until it opens
         self._online = asyncio.Event()
 
     # --- listeners -------------------------------------------------------------------------
@@ -169,9 +175,9 @@ class LinkSupervisor:
     # --- state -----------------------------------------------------------------------------
 
     def _set_state(self, state: LinkState, reason: str, *, board_rebooted: bool = False) -> None:
-        if state is self.state and state is not LinkState.ONLINE:
+        if state is self.state and reason == self.reason and state is not LinkState.ONLINE:
             return
-        self.state = state
+        self.state, self.reason = state, reason
         if state is LinkState.ONLINE:
             self._online.set()
         else:
@@ -212,24 +218,41 @@ class LinkSupervisor:
             raise
         return session
 
+    def _note_unavailable(self, exc: LinkUnavailable) -> None:
+        """One warning per distinct reason the device cannot be opened (at start, and
+        again only when the OS says something else or after the link was up)."""
+        if exc.os_error == self._unavailable:
+            return
+        self._unavailable = exc.os_error
+        log.warning("board_link_unavailable", path=exc.url, error=exc.os_error)
+
     async def run(self) -> None:
         """Run until cancelled."""
         failures = 0
         try:
             while True:
-                self._set_state(LinkState.CONNECTING, "connecting")
+                if self._unavailable is None:  # retrying a device that is not there: quiet
+                    self._set_state(LinkState.CONNECTING, "connecting")
                 try:
                     session = await self._connect_once()
                 except ProtocolVersionMismatch as exc:
                     failures = max(failures + 1, 8)
+                    self._unavailable = None
                     self.last_error = str(exc)
                     self._set_state(LinkState.INCOMPATIBLE, str(exc))
+                except LinkUnavailable as exc:
+                    failures += 1
+                    self.last_error = str(exc)
+                    self._note_unavailable(exc)
+                    self._set_state(LinkState.OFFLINE, str(exc))
                 except (LinkError, TransportError, OSError) as exc:
                     failures += 1
+                    self._unavailable = None
                     self.last_error = str(exc)
                     self._set_state(LinkState.OFFLINE, str(exc))
                 else:
                     failures = 0
+                    self._unavailable = None
                     if self.stats.handshakes > 1:
                         self.stats.reconnects += 1
                     self.session = session

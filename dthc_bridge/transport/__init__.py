@@ -12,7 +12,14 @@ add a link kind here: they hand the link layer an opener of their own (``Transpo
 
 from __future__ import annotations
 
-from .base import BytesCallback, LostCallback, Transport, TransportError, TransportOpener
+from .base import (
+    BytesCallback,
+    LinkUnavailable,
+    LostCallback,
+    Transport,
+    TransportError,
+    TransportOpener,
+)
 from .serial import open_serial
 from .tcp import open_tcp
 from .url import LinkUrl, SerialUrl, TcpUrl, UsbUrl, parse_link_url
@@ -20,6 +27,7 @@ from .usb import open_usb
 
 __all__ = [
     "BytesCallback",
+    "LinkUnavailable",
     "LinkUrl",
     "LostCallback",
     "SerialUrl",
@@ -43,7 +51,8 @@ async def open_transport(
     """Open the link ``url`` names; bytes go to ``on_bytes``, its loss to ``on_lost`` (once).
 
     Raises ValueError for a malformed URL and TransportError when the link cannot be
-    opened (missing device, port in use, connection refused).
+    opened (missing device, port in use, connection refused); for a serial port the
+    OS's refusal is a :class:`LinkUnavailable` naming the path and the OS error.
     ``baudrate`` applies to serial ports only.
     """
     link = parse_link_url(url)

@@ -9,9 +9,17 @@ through ``on_lost`` (with the exception, or None for a close we asked for). Libr
 from __future__ import annotations
 
 import abc
+import os
 from collections.abc import Awaitable, Callable
 
-__all__ = ["BytesCallback", "LostCallback", "Transport", "TransportError", "TransportOpener"]
+__all__ = [
+    "BytesCallback",
+    "LinkUnavailable",
+    "LostCallback",
+    "Transport",
+    "TransportError",
+    "TransportOpener",
+]
 
 BytesCallback = Callable[[bytes], None]
 LostCallback = Callable[[Exception | None], None]
@@ -27,6 +35,27 @@ class TransportError(Exception):
 
     def __str__(self) -> str:
         return f"{self.url}: {self.detail}"
+
+
+class LinkUnavailable(TransportError):
+    """The link cannot be opened (no such device, permission denied, in use): the path and
+    what the OS said, so the log and the published state can say it in those words."""
+
+    def __init__(self, url: str, reason: str, errno: int | None = None) -> None:
+        super().__init__(url, f"cannot open: {reason}")
+        self.args = (url, reason, errno)  # copies and pickles rebuild this class
+        self.reason = reason  # the OS's words: "No such file or directory"
+        self.errno = errno
+
+    @property
+    def os_error(self) -> str:
+        """``[Errno 2] No such file or directory`` (the reason alone without an errno)."""
+        if self.errno is None:
+            return self.reason
+        return f"[Errno {self.errno}] {os.strerror(self.errno)}"
+
+    def __str__(self) -> str:
+        return f"cannot open {self.url}: {self.reason}"
 
 
 class Transport(abc.ABC):

@@ -9,11 +9,13 @@ then closes the port and we report ``on_lost(TransportError)`` once.
 
 from __future__ import annotations
 
+import os
+
 import serial
 import serial_asyncio_fast
 import structlog
 
-from .base import BytesCallback, LostCallback, TransportError
+from .base import BytesCallback, LinkUnavailable, LostCallback, TransportError
 from .stream import StreamTransport
 
 __all__ = ["CLOSE_TIMEOUT_S", "SerialTransport", "open_serial"]
@@ -40,7 +42,9 @@ class SerialTransport(StreamTransport):
                 baudrate=baudrate,
                 exclusive=True,
             )
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except (serial.SerialException, OSError) as exc:
+            raise _unavailable(self.url, exc) from exc
+        except ValueError as exc:
             raise TransportError(self.url, f"cannot open serial port: {exc}") from exc
         self._opened(transport)
         try:
@@ -68,6 +72,18 @@ class SerialTransport(StreamTransport):
 
     def _lost_detail(self, exc: Exception | None) -> str:
         return f"connection lost: {exc}" if exc is not None else "closed by the driver"
+
+
+def _unavailable(path: str, exc: OSError) -> LinkUnavailable:
+    """What the OS said, in its words: pyserial's message repeats the path and the errno
+    ("[Errno 2] could not open port /dev/x: [Errno 2] No such file or directory: '/dev/x'")."""
+    code = exc.errno if isinstance(exc.errno, int) else None
+    if code is None:
+        return LinkUnavailable(path, str(exc))
+    reason = os.strerror(code)
+    if "exclusively lock" in str(exc):
+        reason = f"in use by another program ({reason})"
+    return LinkUnavailable(path, reason, code)
 
 
 async def open_serial(

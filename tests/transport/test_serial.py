@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from dthc_bridge.transport import TransportError, open_transport
+from dthc_bridge.transport import LinkUnavailable, TransportError, open_transport
 
 from .helpers import WAIT_S, Recorder, settle
 
@@ -141,12 +141,15 @@ async def test_write_into_an_unplugged_port_reports_one_transport_error(pty: Pty
 
 
 async def test_a_missing_device_raises_transport_error_on_open(tmp_path: Path) -> None:
-    """A path that does not exist (board unplugged at start) fails the open, nothing leaks."""
+    """A path that does not exist (board unplugged at start) fails the open with the path
+    and the OS's words, nothing leaks."""
     rec = Recorder()
     missing = str(tmp_path / "ttyACM9")
-    with pytest.raises(TransportError, match="cannot open serial port") as info:
+    with pytest.raises(LinkUnavailable) as info:
         await open_transport(missing, rec.on_bytes, rec.on_lost)
     assert info.value.url == missing
+    assert str(info.value) == f"cannot open {missing}: No such file or directory"
+    assert info.value.os_error == "[Errno 2] No such file or directory"
     assert rec.lost == []
 
 
@@ -155,8 +158,9 @@ async def test_a_second_open_of_the_same_port_fails(pty: Pty) -> None:
     first, second = Recorder(), Recorder()
     transport = await open_transport(pty.path, first.on_bytes, first.on_lost)
     try:
-        with pytest.raises(TransportError, match="lock"):
+        with pytest.raises(LinkUnavailable, match="in use by another program") as refused:
             await open_transport(pty.path, second.on_bytes, second.on_lost)
+        assert refused.value.errno is not None  # EAGAIN or EWOULDBLOCK from flock
         transport.write(b"still mine")
         assert await read_master(pty, 10) == b"still mine"
     finally:
