@@ -66,5 +66,5 @@ class DenialWatch:
         if count == 1:
             log.warning(
                 "mqtt_broker_refused", topic=topic, operation=what, reason=reason,
-                hint="the broker's ACL does not let the daemon use this topic",
+                hint="the broker's ACL does not let this client use this topic",
             )  # fmt: skip

@@ -158,7 +158,7 @@ def persistent_broker(tmp_path: Path) -> Iterator[Broker]:
 
 
 ACL_EXAMPLE = Path(__file__).parents[2] / "systemd" / "mosquitto-acl.example"
-USERS = {"dthc-bridge": "bridge-secret", "sender": "sender-secret"}
+USERS = {"dthc-daemon": "daemon-secret", "dthc-sender": "sender-secret"}
 
 
 @pytest.fixture
