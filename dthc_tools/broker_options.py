@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -19,7 +21,13 @@ from pydantic import SecretStr, ValidationError
 
 from dthc_bridge.mqtt.broker import BrokerSettings, MqttTls
 
-__all__ = ["PASSWORD_ENV", "BrokerOptionError", "add_broker_arguments", "broker_from_args"]
+__all__ = [
+    "PASSWORD_ENV",
+    "BrokerOptionError",
+    "add_broker_arguments",
+    "broker_from_args",
+    "parse_with_broker",
+]
 
 PASSWORD_ENV = "DTHC_BROKER_PASSWORD"  # noqa: S105 - the variable's name, not a password
 _PORTS = {"mqtt": 1883, "mqtts": 8883}
@@ -49,6 +57,19 @@ def add_broker_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--broker-cert-file", type=Path, metavar="FILE", help="client certificate")
     group.add_argument("--broker-key-file", type=Path, metavar="FILE", help="its private key")
     group.add_argument("--protocol", default="5", choices=["5", "3.1.1"], help="MQTT version")
+
+
+def parse_with_broker(
+    parser: argparse.ArgumentParser, argv: Sequence[str] | None
+) -> argparse.Namespace:
+    """``parser``'s arguments (``sys.argv`` without ``argv``) with ``broker_settings`` built
+    from the broker options; a bad one is argparse's usage error naming it (exit 2)."""
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        args.broker_settings = broker_from_args(args)
+    except BrokerOptionError as exc:
+        parser.error(str(exc))
+    return args
 
 
 def broker_from_args(

@@ -15,7 +15,7 @@ import aiomqtt
 from aiohttp import web
 
 from dthc_bridge.mqtt.broker import describe_broker_error
-from dthc_tools.broker_options import BrokerOptionError, add_broker_arguments, broker_from_args
+from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
 from dthc_tools.sender.daemon_client import DaemonClient
 
 from .connections import start_guarded_site
@@ -153,12 +153,7 @@ def _url_host(host: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge panel") -> int:
-    parser = build_parser(prog)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        args.broker_settings = broker_from_args(args)
-    except BrokerOptionError as exc:
-        parser.error(str(exc))
+    args = parse_with_broker(build_parser(prog), argv)
     try:
         return asyncio.run(serve(args))
     except aiomqtt.MqttError as exc:

@@ -14,7 +14,7 @@ import aiomqtt
 
 from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_bridge.program.options import add_dialect_options
-from dthc_tools.broker_options import BrokerOptionError, add_broker_arguments, broker_from_args
+from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
 
 from .backend import BackendError, MotionBackend, SimGantryBackend
 from .console import OperatorConsole
@@ -131,12 +131,7 @@ def _interactive() -> bool:
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -> int:
-    parser = build_parser(prog)
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        args.broker_settings = broker_from_args(args)
-    except BrokerOptionError as exc:
-        parser.error(str(exc))
+    args = parse_with_broker(build_parser(prog), argv)
     try:
         return asyncio.run(_send(args))
     except aiomqtt.MqttError as exc:

@@ -9,7 +9,6 @@ import io
 import re
 import stat
 import subprocess
-from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -42,6 +41,8 @@ from dthc_bridge.deploy.install import (
 from dthc_bridge.deploy.render import DeployError
 from dthc_bridge.mqtt.roles import Role, render_acl
 
+from .conftest import never_run
+
 CONF = "/etc/mosquitto/conf.d/dthc-bridge.conf"
 PASSWD = "/etc/mosquitto/conf.d/dthc-bridge.passwd"  # noqa: S105 - a path
 ACL = "/etc/mosquitto/conf.d/dthc-bridge.acl"
@@ -59,33 +60,13 @@ HOST = HostState(
 )
 
 
-def _never_run(argv: Sequence[str]) -> None:
-    raise AssertionError(f"command run: {argv}")
-
-
-@pytest.fixture
-def root(tmp_path: Path) -> Path:
-    path = tmp_path / "root"
-    path.mkdir()
-    return path
-
-
-@pytest.fixture
-def bin_dir(tmp_path: Path) -> Path:
-    path = tmp_path / "opt" / "venv" / "bin"
-    path.mkdir(parents=True)
-    (path / "dthc-bridge").write_text("#!/bin/sh\n")
-    (path / "dthc-bridge").chmod(0o755)
-    return path
-
-
 def _install(
     root: Path, bin_dir: Path, host: HostState = HOST, **changes: object
 ) -> tuple[int, str]:
     changes.setdefault("broker", BrokerOptions())
     options = InstallOptions(root=root, bin_dir=bin_dir, **changes)  # type: ignore[arg-type]
     out, err = io.StringIO(), io.StringIO()
-    code = install_service(options, out=out, err=err, host=host, runner=_never_run)
+    code = install_service(options, out=out, err=err, host=host, runner=never_run)
     return code, out.getvalue() + err.getvalue()
 
 

@@ -7,7 +7,6 @@ import io
 import os
 import re
 import stat
-from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -31,6 +30,8 @@ from dthc_bridge.deploy.install import (
 )
 from dthc_bridge.deploy.render import BoardIds
 
+from .conftest import never_run
+
 FRESH_HOST = HostState(
     user_exists=False,
     group_exists=False,
@@ -49,37 +50,17 @@ INSTALLED_HOST = HostState(
 )
 
 
-def _never_run(argv: Sequence[str]) -> None:
-    raise AssertionError(f"command run: {argv}")
-
-
-@pytest.fixture
-def bin_dir(tmp_path: Path) -> Path:
-    path = tmp_path / "opt" / "venv" / "bin"
-    path.mkdir(parents=True)
-    (path / "dthc-bridge").write_text("#!/bin/sh\n")
-    (path / "dthc-bridge").chmod(0o755)
-    return path
-
-
-@pytest.fixture
-def root(tmp_path: Path) -> Path:
-    path = tmp_path / "root"
-    path.mkdir()
-    return path
-
-
 def _install(root: Path, bin_dir: Path, **changes: object) -> tuple[int, str]:
     options = InstallOptions(root=root, bin_dir=bin_dir, **changes)  # type: ignore[arg-type]
     out, err = io.StringIO(), io.StringIO()
-    code = install_service(options, out=out, err=err, host=FRESH_HOST, runner=_never_run)
+    code = install_service(options, out=out, err=err, host=FRESH_HOST, runner=never_run)
     return code, out.getvalue() + err.getvalue()
 
 
 def _uninstall(root: Path, **changes: object) -> tuple[int, str]:
     options = UninstallOptions(root=root, **changes)  # type: ignore[arg-type]
     out, err = io.StringIO(), io.StringIO()
-    code = uninstall_service(options, out=out, err=err, host=INSTALLED_HOST, runner=_never_run)
+    code = uninstall_service(options, out=out, err=err, host=INSTALLED_HOST, runner=never_run)
     return code, out.getvalue() + err.getvalue()
 
 
@@ -166,7 +147,7 @@ def test_live_dry_run_shows_the_commands(bin_dir: Path) -> None:
         pytest.skip("dthc-bridge is installed on this machine: the dry run would compare to it")
     out, err = io.StringIO(), io.StringIO()
     options = InstallOptions(dry_run=True, bin_dir=bin_dir)
-    code = install_service(options, out=out, err=err, host=FRESH_HOST, runner=_never_run)
+    code = install_service(options, out=out, err=err, host=FRESH_HOST, runner=never_run)
     assert code == 0, err.getvalue()
     commands = [
         line.split("would run", 1)[1].strip()
@@ -271,13 +252,13 @@ def test_live_install_needs_root(monkeypatch: pytest.MonkeyPatch, bin_dir: Path)
         out=io.StringIO(),
         err=err,
         host=FRESH_HOST,
-        runner=_never_run,
+        runner=never_run,
     )
     assert code == 1
     assert "run it as root" in err.getvalue()
     assert "--dry-run" in err.getvalue()
     code = uninstall_service(
-        UninstallOptions(), out=io.StringIO(), err=err, host=INSTALLED_HOST, runner=_never_run
+        UninstallOptions(), out=io.StringIO(), err=err, host=INSTALLED_HOST, runner=never_run
     )
     assert code == 1
 
@@ -293,7 +274,7 @@ def test_live_install_refuses_a_missing_executable(
         out=io.StringIO(),
         err=err,
         host=FRESH_HOST,
-        runner=_never_run,
+        runner=never_run,
     )
     assert code == 1
     assert "missing or not executable" in err.getvalue()

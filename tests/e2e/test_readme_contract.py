@@ -68,9 +68,11 @@ async def test_the_worked_example_answers_as_the_readme_says(tmp_path: Path) -> 
     assert answers[2] == answers[1]  # the repeat: the cached answer, not run twice
     assert by[3][:2] == ("ex-2", "error")
     assert "already used for a different gcode request" in by[3][2]
-    assert by[4][:2] == ("ex-3", "error")
-    assert "G200 A" in by[4][2]
-    assert by[5][:2] == (None, "ok")  # the motion report
-    assert answers[5]["data"] == {"used": False}  # the mock board measures XY speed itself
-    assert len(answers) == 6
+    assert by[4][:2] == ("ex-2", "error")  # the same transaction under another request name
+    assert "already used for a 'gcode' request; this is a 'status' request" in by[4][2]
+    assert by[5][:2] == ("ex-3", "error")
+    assert "G200 A" in by[5][2]
+    assert by[6][:2] == (None, "ok")  # the motion report
+    assert answers[6]["data"] == {"used": False}  # the mock board measures XY speed itself
+    assert len(answers) == 7
     assert any('"online"' in line for line in out.splitlines() if "availability" in line)

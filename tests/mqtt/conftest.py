@@ -161,19 +161,24 @@ ACL_EXAMPLE = Path(__file__).parents[2] / "systemd" / "mosquitto-acl.example"
 USERS = {"dthc-daemon": "daemon-secret", "dthc-sender": "sender-secret"}
 
 
+def write_passwords(path: Path, users: dict[str, str]) -> Path:
+    """A mosquitto password file made by Debian's own mosquitto_passwd (skips without it)."""
+    if MOSQUITTO_PASSWD is None:
+        pytest.skip("mosquitto_passwd is not installed")
+    for index, (user, password) in enumerate(users.items()):
+        create = ["-c"] if index == 0 else []
+        subprocess.run(
+            [MOSQUITTO_PASSWD, *create, "-b", str(path), user, password],
+            check=True, capture_output=True,
+        )  # fmt: skip
+    return path
+
+
 @pytest.fixture
 def auth_broker(tmp_path: Path) -> Iterator[Broker]:
     """A private broker with passwords (mosquitto_passwd) and the shipped ACL example."""
     _require_mosquitto()
-    if MOSQUITTO_PASSWD is None:
-        pytest.skip("mosquitto_passwd is not installed")
-    passwords = tmp_path / "passwords"
-    for index, (user, password) in enumerate(USERS.items()):
-        create = ["-c"] if index == 0 else []
-        subprocess.run(
-            [MOSQUITTO_PASSWD, *create, "-b", str(passwords), user, password],
-            check=True, capture_output=True,
-        )  # fmt: skip
+    passwords = write_passwords(tmp_path / "passwords", USERS)
     instance = Broker(tmp_path, password_file=passwords, acl_file=ACL_EXAMPLE)
     instance.start()
     try:

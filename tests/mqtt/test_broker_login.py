@@ -24,7 +24,7 @@ from dthc_tools.broker_options import (
 from dthc_tools.panel import cli as panel_cli
 from dthc_tools.sender import cli as sender_cli
 
-from .conftest import MOSQUITTO_PASSWD, OPENSSL, Broker, _require_mosquitto
+from .conftest import OPENSSL, Broker, _require_mosquitto, write_passwords
 from .helpers import fast_settings, running_gateway
 
 PASSWORDS = {"dthc-daemon": "daemon-secret-0123456789", "dthc-sender": "sender-secret-0123456789"}
@@ -88,15 +88,7 @@ def test_a_password_file_that_cannot_be_read_is_named(tmp_path: Path) -> None:
 def password_broker(tmp_path: Path) -> Iterator[Broker]:
     """mosquitto with two users, and the roles' ACL less the daemon's ``materials`` topic."""
     _require_mosquitto()
-    if MOSQUITTO_PASSWD is None:
-        pytest.skip("mosquitto_passwd is not installed")
-    passwords = tmp_path / "passwd"
-    for index, (user, password) in enumerate(PASSWORDS.items()):
-        create = ["-c"] if index == 0 else []
-        subprocess.run(
-            [MOSQUITTO_PASSWD, *create, "-b", str(passwords), user, password],
-            check=True, capture_output=True,
-        )  # fmt: skip
+    passwords = write_passwords(tmp_path / "passwd", PASSWORDS)
     acl = render_acl("dthc/table1", {Role.DAEMON: "dthc-daemon", Role.SENDER: "dthc-sender"})
     acl_file = tmp_path / "acl"
     acl_file.write_text(acl.replace("topic write dthc/table1/materials\n", ""))
