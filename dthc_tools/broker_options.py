@@ -3,7 +3,9 @@
 ``--broker mqtt://[USER@]HOST[:PORT]`` (``mqtts://`` for TLS), ``--broker-user``,
 ``--broker-password-file`` or the ``DTHC_BROKER_PASSWORD`` environment variable (never a
 password on the command line: ``ps`` shows it to every user), ``--broker-ca-file``,
-``--broker-cert-file`` and ``--broker-key-file``, ``--protocol``. They build a
+``--broker-cert-file`` and ``--broker-key-file``, ``--protocol``; with no login given,
+the role's password copied where the installer says (``~/.config/dthc-bridge/<role>.password``).
+They build a
 :class:`dthc_bridge.mqtt.broker.BrokerSettings`, the model the daemon's ``[mqtt]`` extends,
 so the sender, the panel and the daemon log in and verify the broker the same way.
 """
@@ -13,7 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -26,6 +28,7 @@ __all__ = [
     "BrokerOptionError",
     "add_broker_arguments",
     "broker_from_args",
+    "login_file",
     "parse_with_broker",
 ]
 
@@ -37,7 +40,17 @@ class BrokerOptionError(ValueError):
     """A broker option that cannot be used; the message names the option and the value."""
 
 
-def add_broker_arguments(parser: argparse.ArgumentParser) -> None:
+def login_file(role: str, environ: Mapping[str, str]) -> Path:
+    """Where ``role``'s broker password is looked for when none is given: the copy the
+    installer tells the owner to make (``~/.config/dthc-bridge/<role>.password``)."""
+    config = environ.get("XDG_CONFIG_HOME") or str(Path(environ.get("HOME", "~")) / ".config")
+    return Path(config).expanduser() / "dthc-bridge" / f"{role}.password"
+
+
+def add_broker_arguments(parser: argparse.ArgumentParser, *, role: str = "sender") -> None:
+    """The broker options; ``role`` names the login used when none is given: user
+    ``dthc-<role>`` with the password in :func:`login_file`, if that file exists."""
+    parser.set_defaults(broker_role=role)
     group = parser.add_argument_group(
         "broker", f"the MQTT broker and this tool's login (password: a file or {PASSWORD_ENV})"
     )
@@ -73,7 +86,7 @@ def parse_with_broker(
 
 
 def broker_from_args(
-    args: argparse.Namespace, environ: os._Environ[str] | dict[str, str] | None = None
+    args: argparse.Namespace, environ: Mapping[str, str] | None = None
 ) -> BrokerSettings:
     """The broker settings the options describe; BrokerOptionError names a bad one."""
     environ = os.environ if environ is None else environ
@@ -94,10 +107,17 @@ def broker_from_args(
         raise BrokerOptionError(f"--broker {url!r}: the port is not a number 1-65535") from None
     username = args.broker_user or parts.username
     password = environ.get(PASSWORD_ENV) or None
-    if password is not None and args.broker_password_file is not None:
+    password_file = args.broker_password_file
+    if password is not None and password_file is not None:
         raise BrokerOptionError(
             f"--broker-password-file and {PASSWORD_ENV} are both given: keep one"
         )
+    role = getattr(args, "broker_role", "sender")
+    default_file = login_file(role, environ)
+    if username is None and password is None and password_file is None and default_file.is_file():
+        # The installer's broker has a user per role; its note says to copy the password
+        # here, so an owner who did runs the tools with no login options at all.
+        username, password_file = f"dthc-{role}", default_file
     tls = None
     certificate = args.broker_cert_file or args.broker_key_file
     if parts.scheme == "mqtts" or args.broker_ca_file is not None or certificate is not None:
@@ -124,7 +144,7 @@ def broker_from_args(
             port=port,
             username=username,
             password=SecretStr(password) if password is not None else None,
-            password_file=args.broker_password_file,
+            password_file=password_file,
             tls=tls,
             protocol=args.protocol,
         )

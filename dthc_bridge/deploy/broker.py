@@ -424,8 +424,9 @@ def client_notes(options: BrokerOptions) -> list[Step]:
         notes.append(
             Note(
                 f"{role.value}'s login: mkdir -p ~/.config/dthc-bridge && sudo install -m 600 "
-                f'-o "$USER" {password_path(role)} {copy}; then dthc-bridge {command} '
-                f"--broker-user {BROKER_USERS[role]} --broker-password-file {copy} ..."
+                f'-o "$USER" {password_path(role)} {copy}; dthc-bridge {command} then logs '
+                f"in as {BROKER_USERS[role]} with it by itself (or: --broker-user "
+                f"{BROKER_USERS[role]} --broker-password-file FILE)"
             )
         )
     if tls is not None:

@@ -450,7 +450,13 @@ def add_install_arguments(parser: argparse.ArgumentParser) -> None:
         "--broker-config",
         metavar="DIR",
         default=None,
-        help=f"where mosquitto reads *.conf from (Debian: {DEBIAN_INCLUDE_DIR})",
+        help=f"where mosquitto reads *.conf from (Debian: {DEBIAN_INCLUDE_DIR}); the default "
+        "on a first install beside Debian's mosquitto",
+    )
+    broker.add_argument(
+        "--no-broker-config",
+        action="store_true",
+        help="leave the broker alone (one elsewhere, secured by its own users and ACL)",
     )
     broker.add_argument(
         "--broker-listen",
@@ -490,6 +496,8 @@ def run_install(args: argparse.Namespace) -> int:
     """``install-service`` from parsed arguments (see :func:`add_install_arguments`)."""
     try:
         board = BoardIds.parse(args.vid, args.pid, args.serial)
+        if args.broker_config is None and not args.no_broker_config:
+            args.broker_config = _default_broker_config(args.root)
         broker = _broker_options(args)
     except DeployError as exc:
         sys.stderr.write(f"dthc-bridge install-service: error: {exc}\n")
@@ -506,6 +514,30 @@ def run_install(args: argparse.Namespace) -> int:
         board_id=args.board_id,
     )
     return install_service(options)
+
+
+def _default_broker_config(root: Path) -> str | None:
+    """Safety invariant 8, a default install is the secure one: a first install beside
+    Debian's mosquitto locks that broker (users per role, the ACL) unless told not to, and
+    a re-install keeps it locked. A re-install over an open broker leaves it (its kept
+    configuration would lack the daemon's login) and says how to lock it."""
+    fresh = not (root / CONFIG_PATH.lstrip("/")).exists()
+    local = (root / DEBIAN_INCLUDE_DIR.lstrip("/")).is_dir()
+    locked = (root / BrokerOptions().conf_path.lstrip("/")).exists()  # by an earlier install
+    if local and (fresh or locked):
+        return DEBIAN_INCLUDE_DIR
+    why = (
+        f"{CONFIG_PATH} exists (its [mqtt] has no login to add by itself)"
+        if not fresh
+        else f"no local mosquitto ({DEBIAN_INCLUDE_DIR} is missing)"
+    )
+    sys.stdout.write(
+        f"note: the broker is not locked by this install: {why}. Anyone who may publish "
+        f"to it can light the torch: add --broker-config {DEBIAN_INCLUDE_DIR} for a local "
+        "mosquitto, or give a remote broker users per role and the ACL of "
+        "systemd/mosquitto-acl.example; --no-broker-config silences this\n"
+    )
+    return None
 
 
 def _broker_options(args: argparse.Namespace) -> BrokerOptions | None:

@@ -44,7 +44,7 @@ def build_parser(prog: str = "dthc-bridge panel") -> argparse.ArgumentParser:
     )
     parser.add_argument("--base-topic", default="dthc")
     parser.add_argument("--board-id", default="table1")
-    add_broker_arguments(parser)
+    add_broker_arguments(parser, role="panel")
     parser.add_argument(
         "--listen", default="127.0.0.1:8080",
         help="HOST:PORT to serve on (default localhost only; anything else needs a token)",

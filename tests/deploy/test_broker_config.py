@@ -378,3 +378,44 @@ def test_systemd_examples_are_what_the_installer_writes() -> None:
         {Role.DAEMON: "dthc-daemon", Role.SENDER: "dthc-sender", Role.PANEL: "dthc-panel",
          Role.DASHBOARD: "dthc-dashboard"},
     )  # fmt: skip
+
+
+def test_a_first_install_beside_mosquitto_locks_the_broker_by_default(
+    root: Path, bin_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Safety invariant 8, a default install is the secure one: no broker flag, Debian's
+    mosquitto present, no configuration yet: the broker files are written and the new
+    configuration logs the daemon in. A re-install keeps what it has and says so; with
+    --no-broker-config nothing is written or said."""
+    parser = argparse.ArgumentParser()
+    add_install_arguments(parser)
+    base = ["--root", str(root), "--bin-dir", str(bin_dir), "--no-start"]
+    _file(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
+    assert run_install(parser.parse_args(base)) == 0
+    assert "allow_anonymous false" in _file(root, CONF).read_text()
+    config = _file(root, "/etc/dthc-bridge/config.toml").read_text()
+    assert 'username = "dthc-daemon"' in config
+    assert "password_file" in config
+    capsys.readouterr()
+
+    passwd = _file(root, PASSWD).read_text()
+    assert run_install(parser.parse_args(base)) == 0  # a re-install (an upgrade) stays locked
+    assert "not locked" not in capsys.readouterr().out
+    assert _file(root, PASSWD).read_text() == passwd  # the passwords are kept
+
+
+def test_without_a_local_mosquitto_or_with_a_kept_config_the_install_says_the_broker_is_open(
+    root: Path, bin_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parser = argparse.ArgumentParser()
+    add_install_arguments(parser)
+    base = ["--root", str(root), "--bin-dir", str(bin_dir), "--no-start"]
+    assert run_install(parser.parse_args(base)) == 0
+    assert not _file(root, CONF).exists()
+    assert "no local mosquitto" in capsys.readouterr().out
+    _file(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
+    assert run_install(parser.parse_args(base)) == 0  # the configuration is kept: no login
+    assert not _file(root, CONF).exists()
+    assert "config.toml exists" in capsys.readouterr().out
+    assert run_install(parser.parse_args([*base, "--no-broker-config"])) == 0
+    assert "not locked" not in capsys.readouterr().out

@@ -192,3 +192,23 @@ async def test_the_daemon_warns_once_naming_a_topic_the_broker_denies_it(
     warnings = [entry for entry in logs if entry["event"] == "mqtt_broker_refused"]
     assert refused == {"dthc/table1/materials": 1}, refused
     assert [w["topic"] for w in warnings] == ["dthc/table1/materials"], warnings
+
+
+def test_with_no_login_given_the_roles_copied_password_is_used(tmp_path: Path) -> None:
+    """The installer says to copy a role's password to ~/.config/dthc-bridge/<role>.password:
+    a tool then logs in as dthc-<role> with it, no option needed; given options still win."""
+    home = tmp_path / "home"
+    saved = home / ".config" / "dthc-bridge" / "panel.password"
+    saved.parent.mkdir(parents=True)
+    saved.write_text("copied\n")
+    parser = argparse.ArgumentParser()
+    add_broker_arguments(parser, role="panel")
+    broker = broker_from_args(parser.parse_args([]), environ={"HOME": str(home)})
+    assert (broker.username, broker.password_file) == ("dthc-panel", saved)
+    assert broker.read_password() == "copied"
+    own = broker_from_args(
+        parser.parse_args(["--broker-user", "someone"]), environ={"HOME": str(home)}
+    )
+    assert (own.username, own.password_file) == ("someone", None)
+    sender = broker_from_args(_options(), environ={"HOME": str(home)})  # no sender copy
+    assert (sender.username, sender.password_file) == (None, None)
