@@ -354,6 +354,22 @@ static bool batch_waits_for_frame(void)
     return (uint16_t)(now - batch_hold_since_us) < BATCH_HOLD_US;
 }
 
+/* Transmit room kept for a batch while replies are queued: the largest reply (HELLO_INFO,
+ * 45 bytes of payload) and one batch of the configured size, each with its frame overhead
+ * (type, seq, CRC, COBS, delimiter), at most BOARD_TX_RESERVE_MAX (below the smallest ring:
+ * a ring that drains empty always lets the next frame in). */
+#define FRAME_OVERHEAD 7u
+#define REPLY_WIRE_MAX (45u + FRAME_OVERHEAD)
+#ifndef BOARD_TX_RESERVE_MAX
+#define BOARD_TX_RESERVE_MAX 100u
+#endif
+uint16_t board_tx_reserve(void)
+{
+    uint16_t batch = (uint16_t)(DTHC_SAMPLES_HEADER_SIZE + 2u * B.batch_size + FRAME_OVERHEAD);
+    uint16_t reserve = (uint16_t)(REPLY_WIRE_MAX + batch);
+    return reserve < BOARD_TX_RESERVE_MAX ? reserve : BOARD_TX_RESERVE_MAX;
+}
+
 bool board_samples_waiting(void)
 {
     return samples_ready_len != 0;

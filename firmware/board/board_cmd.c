@@ -403,7 +403,16 @@ bool board_poll(void)
     while (budget--) {
         dthc_frame_t f;
         int rc;
-        int16_t c = hal_uart_getc();
+        int16_t c;
+        if (board_rx.enc_len == 0 && hal_uart_tx_free() < board_tx_reserve()) {
+            /* Between frames, a query is read only when the transmit ring has room for
+             * its reply and the next SAMPLES batch: replies to a bunched burst of queries
+             * that fill the ring make the batch wait (tick running) until the next one
+             * completes: SAMPLE_OVERFLOW. Its bytes wait in the receive ring meanwhile;
+             * the transmit ring drains at line rate. */
+            break;
+        }
+        c = hal_uart_getc();
         if (c < 0) {
             break;
         }

@@ -867,6 +867,50 @@ static int test_batch_waits_for_room_in_the_transmit_ring(void)
     return 0;
 }
 
+/* A bunched burst of STATUS queries (a host that lagged sends 30 at once) into a 256-byte
+ * transmit ring that drains at 1 Mbaud: every query is answered, and no batch is lost
+ * (no stream_seq gap, no SAMPLE_OVERFLOW): the replies leave the next batch its room. */
+static int test_a_burst_of_queries_leaves_room_for_the_batches(void)
+{
+    uint8_t wire[16], what = DTHC_QUERY_STATUS;
+    unsigned mark, i, k, n = 0, replies = 0;
+    uint16_t seq_prev = 0;
+    uint32_t drained = 0;
+    hello();
+    run_ms(10);
+    drained = F.tx_len; /* the ring is empty: what was sent so far is on the wire */
+    mark = n_out;
+    for (k = 0; k < 30; k++) {
+        size_t len = dthc_encode_frame(DTHC_MSG_QUERY, (uint8_t)(100 + k), &what, 1, wire,
+                                       sizeof wire);
+        fake_rx(wire, (unsigned)len);
+    }
+    for (k = 0; k < 400; k++) { /* 40 ms in steps of 100 us: 10 bytes leave the ring */
+        drained = drained + 10u < F.tx_len ? drained + 10u : F.tx_len;
+        F.tx_cap = drained + 256u;
+        fake_run_us(100);
+        while (board_poll()) {
+        }
+    }
+    F.tx_cap = sizeof F.tx;
+    parse();
+    for (i = mark; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_STATUS) {
+            replies++;
+        }
+        if (out[i].type != DTHC_MSG_SAMPLES) {
+            continue;
+        }
+        CHECK(!(out[i].p[18] & DTHC_STATUS_SAMPLE_OVERFLOW), "SAMPLE_OVERFLOW in batch %u", n);
+        CHECK(!n || (uint16_t)(dthc_get_u16(out[i].p) - seq_prev) == 1, "stream_seq gap");
+        seq_prev = dthc_get_u16(out[i].p);
+        n++;
+    }
+    CHECK(replies == 30, "%u of 30 queries answered", replies);
+    CHECK(n >= 7, "%u batches in 40 ms", n);
+    return 0;
+}
+
 /* SET_CURRENT is refused (no CURRENT_OUT); SET_LEASE range. */
 static int test_unsupported_and_lease_range(void)
 {
@@ -958,6 +1002,7 @@ static const struct {
     T(calibration_and_filters),
     T(batches),
     T(batch_waits_for_room_in_the_transmit_ring),
+    T(a_burst_of_queries_leaves_room_for_the_batches),
     T(batch_waits_for_a_short_frame),
     T(unsupported_and_lease_range),
     T(arc_lost),
