@@ -13,6 +13,7 @@ import pytest
 import firmware_protocol as fp
 from dthc_bridge.conformance import CHECK_NAMES, ConformanceOptions, run_suite
 from dthc_bridge.conformance.checks_motion import audit_input_events
+from dthc_bridge.conformance.checks_telemetry import count_losses
 from dthc_bridge.conformance.context import InputRecord
 from dthc_bridge.conformance.errors import OutsideWindow
 from dthc_bridge.conformance.window import MotionWindow
@@ -123,3 +124,20 @@ def test_options_keep_the_probe_inside_the_window_and_name_bad_values() -> None:
         ConformanceOptions(link="x", z_window_mm=5, probe_travel_mm=8)
     with pytest.raises(ValueError, match="--lease-ms"):
         ConformanceOptions(link="x", lease_ms=5)
+
+
+def _batch(stream_seq: int, *, overflow: bool = False) -> fp.Samples:
+    status = int(fp.StatusBit.SAMPLE_OVERFLOW) if overflow else 0
+    return fp.Samples(0, stream_seq, stream_seq * 5000, 1000, 0, 0, 0, 0, status, (1,) * 5)
+
+
+def test_telemetry_gaps_count_losses_in_the_window_not_one_flagged_before_it() -> None:
+    """SAMPLE_OVERFLOW marks the batch after a lost one: on the window's first batch it is
+    a loss before the window (no gap can show it), reported apart; inside the window a
+    loss is a gap and a flag, both counted."""
+    clean = [_batch(n) for n in range(10)]
+    assert count_losses(clean) == (0, 0, False)
+    flagged_first = [_batch(0, overflow=True), *clean[1:]]
+    assert count_losses(flagged_first) == (0, 0, True)
+    lost_inside = [*clean[:4], _batch(5, overflow=True), *(_batch(n) for n in range(6, 10))]
+    assert count_losses(lost_inside) == (1, 1, False)
