@@ -126,34 +126,42 @@ class BrokerRefused(Exception):
     again cannot help until the configuration changes."""
 
 
+def _login_refused(exc: BaseException, broker: BrokerSettings) -> str | None:
+    """The broker's reason when it refused the login (bad user or password, not
+    authorized), else None."""
+    rc = getattr(exc, "rc", None)
+    if not isinstance(exc, MqttConnectError) or rc is None:
+        return None
+    value = getattr(rc, "value", rc)
+    table = _V5_LOGIN_REFUSED if broker.protocol == "5" else _V311_LOGIN_REFUSED
+    return table.get(value) if isinstance(value, int) else None
+
+
+def _untrusted(text: str) -> bool:
+    """The TLS handshake failed on the broker's certificate."""
+    return "CERTIFICATE_VERIFY_FAILED" in text or "certificate verify failed" in text
+
+
 def is_refusal(exc: BaseException, broker: BrokerSettings) -> bool:
     """The broker refused the login, or its certificate is not trusted (not: unreachable)."""
-    rc = getattr(exc, "rc", None)
-    if isinstance(exc, MqttConnectError) and rc is not None:
-        value = getattr(rc, "value", rc)
-        table = _V5_LOGIN_REFUSED if broker.protocol == "5" else _V311_LOGIN_REFUSED
-        return isinstance(value, int) and value in table
-    text = str(exc)
-    return "CERTIFICATE_VERIFY_FAILED" in text or "certificate verify failed" in text
+    return _login_refused(exc, broker) is not None or _untrusted(str(exc))
 
 
 def describe_broker_error(exc: BaseException, broker: BrokerSettings) -> str:
     """One line naming what failed when connecting to ``broker``: the login, the TLS
     handshake (certificate), the address, or a file of ours."""
     where = broker.url
-    rc = getattr(exc, "rc", None)
-    if isinstance(exc, aiomqtt.MqttCodeError) and rc is not None:
-        value = getattr(rc, "value", rc)
-        table = _V5_LOGIN_REFUSED if broker.protocol == "5" else _V311_LOGIN_REFUSED
-        if isinstance(value, int) and value in table:
-            who = f"user {broker.username!r}" if broker.username else "an anonymous client"
-            return (
-                f"the broker at {where} refused the login of {who}: {table[value]} "
-                "(check the user name and the password)"
-            )
+    reason = _login_refused(exc, broker)
+    if reason is not None:
+        who = f"user {broker.username!r}" if broker.username else "an anonymous client"
+        return (
+            f"the broker at {where} refused the login of {who}: {reason} "
+            "(check the user name and the password)"
+        )
+    if isinstance(exc, aiomqtt.MqttCodeError) and getattr(exc, "rc", None) is not None:
         return f"the broker at {where} refused the connection: {exc}"
     text = str(exc)
-    if "CERTIFICATE_VERIFY_FAILED" in text or "certificate verify failed" in text:
+    if _untrusted(text):
         ca = broker.tls.ca_file if broker.tls is not None else None
         trust = f"CA file {ca}" if ca is not None else "the system's CA store"
         return f"TLS to {where}: the broker's certificate is not trusted by {trust} ({text})"

@@ -20,7 +20,7 @@ __all__ = ["DenialWatch"]
 
 log = structlog.get_logger("dthc_bridge.mqtt")
 
-_MAX_TRACKED = 4096  # message ids awaiting a PUBACK; beyond this the oldest are forgotten
+_MAX_TRACKED = 4096  # QoS 1 message ids awaiting a PUBACK; beyond it the oldest are forgotten
 
 
 class DenialWatch:
@@ -37,9 +37,13 @@ class DenialWatch:
 
         def tracked_publish(topic: str, *args: Any, **kwargs: Any) -> Any:
             info = publish(topic, *args, **kwargs)
-            if len(topics) >= _MAX_TRACKED:
-                topics.pop(next(iter(topics)))
-            topics[info.mid] = topic
+            # aiomqtt passes (topic, payload, qos, retain, properties); only QoS 1 and 2
+            # are acknowledged, with a reason code, so only they wait here for it.
+            qos = kwargs.get("qos", args[1] if len(args) > 1 else 0)
+            if qos:
+                if len(topics) >= _MAX_TRACKED:
+                    topics.pop(next(iter(topics)))
+                topics[info.mid] = topic
             return info
 
         def checked_on_publish(*args: Any) -> None:
