@@ -7,7 +7,6 @@ import argparse
 import base64
 import io
 import re
-import stat
 import subprocess
 from pathlib import Path
 
@@ -33,15 +32,13 @@ from dthc_bridge.deploy.broker import (
 from dthc_bridge.deploy.install import (
     CONFIG_PATH,
     HostState,
-    InstallOptions,
     add_install_arguments,
-    install_service,
     run_install,
 )
 from dthc_bridge.deploy.render import DeployError
 from dthc_bridge.mqtt.roles import Role, render_acl
 
-from .conftest import never_run
+from .conftest import file_mode, install_staged, staged
 
 CONF = "/etc/mosquitto/conf.d/dthc-bridge.conf"
 PASSWD = "/etc/mosquitto/conf.d/dthc-bridge.passwd"  # noqa: S105 - a path
@@ -64,22 +61,11 @@ def _install(
     root: Path, bin_dir: Path, host: HostState = HOST, **changes: object
 ) -> tuple[int, str]:
     changes.setdefault("broker", BrokerOptions())
-    options = InstallOptions(root=root, bin_dir=bin_dir, **changes)  # type: ignore[arg-type]
-    out, err = io.StringIO(), io.StringIO()
-    code = install_service(options, out=out, err=err, host=host, runner=never_run)
-    return code, out.getvalue() + err.getvalue()
-
-
-def _file(root: Path, system_path: str) -> Path:
-    return root / system_path.lstrip("/")
-
-
-def _mode(path: Path) -> int:
-    return stat.S_IMODE(path.stat().st_mode)
+    return install_staged(root, bin_dir, host, **changes)
 
 
 def _snapshot(root: Path) -> dict[Path, tuple[bytes, int]]:
-    return {p: (p.read_bytes(), _mode(p)) for p in root.rglob("*") if p.is_file()}
+    return {p: (p.read_bytes(), file_mode(p)) for p in root.rglob("*") if p.is_file()}
 
 
 def test_staged_broker_files_and_their_modes(root: Path, bin_dir: Path) -> None:
@@ -88,7 +74,7 @@ def test_staged_broker_files_and_their_modes(root: Path, bin_dir: Path) -> None:
     (group dthc), the others' 0600; the conf names the files by their system paths."""
     code, output = _install(root, bin_dir)
     assert code == 0, output
-    conf = _file(root, CONF).read_text()
+    conf = staged(root, CONF).read_text()
     for line in (
         "per_listener_settings false",
         "allow_anonymous false",
@@ -98,18 +84,18 @@ def test_staged_broker_files_and_their_modes(root: Path, bin_dir: Path) -> None:
     ):
         assert line in conf.splitlines()
     assert "cafile" not in conf
-    assert _mode(_file(root, CONF)) == 0o644
-    assert _mode(_file(root, PASSWD)) == 0o640
-    assert _mode(_file(root, ACL)) == 0o640
-    assert _mode(_file(root, SECRETS_DIR)) == 0o750
-    assert _mode(_file(root, password_path(Role.DAEMON))) == 0o640
+    assert file_mode(staged(root, CONF)) == 0o644
+    assert file_mode(staged(root, PASSWD)) == 0o640
+    assert file_mode(staged(root, ACL)) == 0o640
+    assert file_mode(staged(root, SECRETS_DIR)) == 0o750
+    assert file_mode(staged(root, password_path(Role.DAEMON))) == 0o640
     for role in (Role.SENDER, Role.PANEL, Role.DASHBOARD):
-        assert _mode(_file(root, password_path(role))) == 0o600
-    passwords = {role: _file(root, password_path(role)).read_text().strip() for role in Role}
+        assert file_mode(staged(root, password_path(role))) == 0o600
+    passwords = {role: staged(root, password_path(role)).read_text().strip() for role in Role}
     assert len(set(passwords.values())) == 4
     for password in passwords.values():
         assert len(base64.urlsafe_b64decode(password + "==")) >= 16  # >= 128 random bits
-    entries = dict(line.split(":", 1) for line in _file(root, PASSWD).read_text().splitlines())
+    entries = dict(line.split(":", 1) for line in staged(root, PASSWD).read_text().splitlines())
     assert list(entries) == ["dthc-daemon", "dthc-sender", "dthc-panel", "dthc-dashboard"]
     for role, user in BROKER_USERS.items():
         assert re.fullmatch(r"\$7\$101\$[A-Za-z0-9+/]{16}\$[A-Za-z0-9+/]{86}==", entries[user])
@@ -125,15 +111,15 @@ def test_without_mosquitto_group_the_broker_files_are_root_only(root: Path, bin_
     host = HostState(**{**HOST.__dict__, "broker_group_exists": False})
     code, output = _install(root, bin_dir, host=host)
     assert code == 0, output
-    assert _mode(_file(root, PASSWD)) == 0o600
-    assert _mode(_file(root, ACL)) == 0o600
+    assert file_mode(staged(root, PASSWD)) == 0o600
+    assert file_mode(staged(root, ACL)) == 0o600
     assert "no mosquitto group" in output
 
 
 def test_acl_file_is_render_acl(root: Path, bin_dir: Path) -> None:
     """The ACL written is roles.render_acl for the board's root and the four users."""
     assert _install(root, bin_dir)[0] == 0
-    assert _file(root, ACL).read_text() == render_acl("dthc/table1", dict(BROKER_USERS))
+    assert staged(root, ACL).read_text() == render_acl("dthc/table1", dict(BROKER_USERS))
 
 
 def test_second_install_changes_no_file_and_keeps_the_passwords(root: Path, bin_dir: Path) -> None:
@@ -153,16 +139,16 @@ def test_a_kept_password_keeps_its_hash_when_the_listener_changes(
 ) -> None:
     """A new listener rewrites the conf only; an added role password file is reused."""
     assert _install(root, bin_dir)[0] == 0
-    passwd = _file(root, PASSWD).read_text()
-    sender = _file(root, password_path(Role.SENDER))
+    passwd = staged(root, PASSWD).read_text()
+    sender = staged(root, password_path(Role.SENDER))
     sender.write_text("chosen-by-the-owner\n")
     code, output = _install(
         root, bin_dir, broker=BrokerOptions(listen=Listener(1884, "192.168.1.5"))
     )
     assert code == 0, output
-    assert "listener 1884 192.168.1.5" in _file(root, CONF).read_text()
+    assert "listener 1884 192.168.1.5" in staged(root, CONF).read_text()
     assert f"write            {CONF}" in output
-    new = dict(line.split(":", 1) for line in _file(root, PASSWD).read_text().splitlines())
+    new = dict(line.split(":", 1) for line in staged(root, PASSWD).read_text().splitlines())
     old = dict(line.split(":", 1) for line in passwd.splitlines())
     assert new["dthc-daemon"] == old["dthc-daemon"]
     assert new["dthc-sender"] != old["dthc-sender"]
@@ -172,13 +158,13 @@ def test_a_kept_password_keeps_its_hash_when_the_listener_changes(
 
 def test_an_empty_password_file_is_refused(root: Path, bin_dir: Path) -> None:
     """An empty role password is no password: say which file, change nothing."""
-    empty = _file(root, password_path(Role.PANEL))
+    empty = staged(root, password_path(Role.PANEL))
     empty.parent.mkdir(parents=True)
     empty.write_text("\n")
     code, output = _install(root, bin_dir)
     assert code == 1
     assert "panel.password is empty" in output
-    assert not _file(root, CONF).exists()
+    assert not staged(root, CONF).exists()
 
 
 def test_dry_run_prints_the_broker_files_and_writes_nothing(root: Path, bin_dir: Path) -> None:
@@ -209,7 +195,7 @@ def test_live_commands_restart_then_reload_then_nothing(root: Path, bin_dir: Pat
 
     assert run() == [("systemctl", "restart", "mosquitto.service")]
     assert run() == []
-    _file(root, ACL).write_text("stale\n")
+    staged(root, ACL).write_text("stale\n")
     assert run() == [("systemctl", "reload", "mosquitto.service")]
 
 
@@ -218,13 +204,13 @@ def test_new_config_logs_the_daemon_in(root: Path, bin_dir: Path) -> None:
     the daemon's own model loads it."""
     code, output = _install(root, bin_dir, board_id="plasma2", base_topic="shop")
     assert code == 0, output
-    config = load_config(_file(root, CONFIG_PATH))
+    config = load_config(staged(root, CONFIG_PATH))
     assert config.mqtt.username == "dthc-daemon"
     assert config.mqtt.password_file == Path("/etc/dthc-bridge/broker/daemon.password")
     assert (config.mqtt.host, config.mqtt.port) == ("localhost", 1883)
     assert (config.mqtt.base_topic, config.mqtt.board_id) == ("shop", "plasma2")
     assert config.mqtt.tls is None
-    assert "topic write shop/plasma2/request/#" in _file(root, ACL).read_text()
+    assert "topic write shop/plasma2/request/#" in staged(root, ACL).read_text()
 
 
 def test_tls_only_broker_config(root: Path, bin_dir: Path) -> None:
@@ -238,7 +224,7 @@ def test_tls_only_broker_config(root: Path, bin_dir: Path) -> None:
     )
     code, output = _install(root, bin_dir, broker=BrokerOptions(listen=None, tls=tls))
     assert code == 0, output
-    conf = _file(root, CONF).read_text().splitlines()
+    conf = staged(root, CONF).read_text().splitlines()
     assert [line for line in conf if line.startswith("listener")] == ["listener 8883"]
     for line in (
         "cafile /etc/ssl/dthc/ca.crt",
@@ -247,7 +233,7 @@ def test_tls_only_broker_config(root: Path, bin_dir: Path) -> None:
         "require_certificate true",
     ):
         assert line in conf
-    config = load_config(_file(root, CONFIG_PATH))
+    config = load_config(staged(root, CONFIG_PATH))
     assert config.mqtt.port == 8883
     assert config.mqtt.tls is not None
     assert config.mqtt.tls.ca_file == Path("/etc/ssl/dthc/ca.crt")
@@ -257,7 +243,7 @@ def test_tls_only_broker_config(root: Path, bin_dir: Path) -> None:
 def test_existing_config_gets_a_note_with_the_lines_to_add(root: Path, bin_dir: Path) -> None:
     """A kept configuration is not touched; the installer says exactly what to set, and the
     ACL follows its board_id."""
-    config = _file(root, CONFIG_PATH)
+    config = staged(root, CONFIG_PATH)
     config.parent.mkdir(parents=True)
     config.write_text('[mqtt]\nboard_id = "table7"\n')
     code, output = _install(root, bin_dir)
@@ -267,7 +253,7 @@ def test_existing_config_gets_a_note_with_the_lines_to_add(root: Path, bin_dir: 
         'set in its [mqtt] section: username = "dthc-daemon", '
         'password_file = "/etc/dthc-bridge/broker/daemon.password"'
     ) in output
-    assert "topic read dthc/table7/request/#" in _file(root, ACL).read_text()
+    assert "topic read dthc/table7/request/#" in staged(root, ACL).read_text()
     config.write_text(
         '[mqtt]\nboard_id = "table7"\nusername = "dthc-daemon"\n'
         'password_file = "/etc/dthc-bridge/broker/daemon.password"\n'
@@ -290,7 +276,7 @@ def test_command_line_broker_options(root: Path, bin_dir: Path, tmp_path: Path) 
          "/c.key", "--broker-tls-ca", "/ca.crt", "--broker-tls-listen", "10.0.0.5:8884"]
     )  # fmt: skip
     assert run_install(args) == 0
-    conf = _file(root, CONF).read_text()
+    conf = staged(root, CONF).read_text()
     assert "listener 1884 ::1" in conf
     assert "listener 8884 10.0.0.5" in conf
     assert "require_certificate" not in conf
@@ -353,10 +339,10 @@ def test_write_broker_files_for_an_end_to_end_test(tmp_path: Path) -> None:
     assert files.conf == tmp_path / CONF.lstrip("/")
     assert files.acl.read_text() == render_acl("dthc/table1", dict(BROKER_USERS))
     assert files.password(Role.SENDER) == files.passwords[Role.SENDER].read_text().strip()
-    staged = files.conf_under_root()
-    assert f"password_file {files.passwd}" in staged
-    assert f"acl_file {files.acl}" in staged
-    assert staged.replace(str(tmp_path), "") == files.conf.read_text()
+    conf_text = files.conf_under_root()
+    assert f"password_file {files.passwd}" in conf_text
+    assert f"acl_file {files.acl}" in conf_text
+    assert conf_text.replace(str(tmp_path), "") == files.conf.read_text()
     assert render_broker_conf(files.options, "dthc/table1") == files.conf.read_text()
     again = write_broker_files(tmp_path, files.options)
     assert again.password(Role.SENDER) == files.password(Role.SENDER)
@@ -390,18 +376,18 @@ def test_a_first_install_beside_mosquitto_locks_the_broker_by_default(
     parser = argparse.ArgumentParser()
     add_install_arguments(parser)
     base = ["--root", str(root), "--bin-dir", str(bin_dir), "--no-start"]
-    _file(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
+    staged(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
     assert run_install(parser.parse_args(base)) == 0
-    assert "allow_anonymous false" in _file(root, CONF).read_text()
-    config = _file(root, "/etc/dthc-bridge/config.toml").read_text()
+    assert "allow_anonymous false" in staged(root, CONF).read_text()
+    config = staged(root, "/etc/dthc-bridge/config.toml").read_text()
     assert 'username = "dthc-daemon"' in config
     assert "password_file" in config
     capsys.readouterr()
 
-    passwd = _file(root, PASSWD).read_text()
+    passwd = staged(root, PASSWD).read_text()
     assert run_install(parser.parse_args(base)) == 0  # a re-install (an upgrade) stays locked
     assert "not locked" not in capsys.readouterr().out
-    assert _file(root, PASSWD).read_text() == passwd  # the passwords are kept
+    assert staged(root, PASSWD).read_text() == passwd  # the passwords are kept
 
 
 def test_without_a_local_mosquitto_or_with_a_kept_config_the_install_says_the_broker_is_open(
@@ -411,11 +397,11 @@ def test_without_a_local_mosquitto_or_with_a_kept_config_the_install_says_the_br
     add_install_arguments(parser)
     base = ["--root", str(root), "--bin-dir", str(bin_dir), "--no-start"]
     assert run_install(parser.parse_args(base)) == 0
-    assert not _file(root, CONF).exists()
+    assert not staged(root, CONF).exists()
     assert "no local mosquitto" in capsys.readouterr().out
-    _file(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
+    staged(root, "/etc/mosquitto/conf.d").mkdir(parents=True)
     assert run_install(parser.parse_args(base)) == 0  # the configuration is kept: no login
-    assert not _file(root, CONF).exists()
+    assert not staged(root, CONF).exists()
     assert "config.toml exists" in capsys.readouterr().out
     assert run_install(parser.parse_args([*base, "--no-broker-config"])) == 0
     assert "not locked" not in capsys.readouterr().out

@@ -6,7 +6,6 @@ import argparse
 import io
 import os
 import re
-import stat
 from pathlib import Path
 
 import pytest
@@ -30,7 +29,7 @@ from dthc_bridge.deploy.install import (
 )
 from dthc_bridge.deploy.render import BoardIds
 
-from .conftest import never_run
+from .conftest import file_mode, install_staged, never_run, staged
 
 FRESH_HOST = HostState(
     user_exists=False,
@@ -51,10 +50,7 @@ INSTALLED_HOST = HostState(
 
 
 def _install(root: Path, bin_dir: Path, **changes: object) -> tuple[int, str]:
-    options = InstallOptions(root=root, bin_dir=bin_dir, **changes)  # type: ignore[arg-type]
-    out, err = io.StringIO(), io.StringIO()
-    code = install_service(options, out=out, err=err, host=FRESH_HOST, runner=never_run)
-    return code, out.getvalue() + err.getvalue()
+    return install_staged(root, bin_dir, FRESH_HOST, **changes)
 
 
 def _uninstall(root: Path, **changes: object) -> tuple[int, str]:
@@ -64,35 +60,27 @@ def _uninstall(root: Path, **changes: object) -> tuple[int, str]:
     return code, out.getvalue() + err.getvalue()
 
 
-def _file(root: Path, system_path: str) -> Path:
-    return root / system_path.lstrip("/")
-
-
-def _mode(path: Path) -> int:
-    return stat.S_IMODE(path.stat().st_mode)
-
-
 def test_staging_install_writes_the_filled_in_files(root: Path, bin_dir: Path) -> None:
     """Unit, rules and config land under the root with placeholders filled and tight modes."""
     board = BoardIds.parse("1209", "d7c0", "TABLE1")
     code, output = _install(root, bin_dir, board=board)
     assert code == 0, output
-    unit = _file(root, UNIT_PATH).read_text()
+    unit = staged(root, UNIT_PATH).read_text()
     assert f"ExecStart={bin_dir}/dthc-bridge run --config /etc/dthc-bridge/config.toml" in unit
     assert "User=dthc" in unit
-    rules = _file(root, RULES_PATH).read_text()
+    rules = staged(root, RULES_PATH).read_text()
     assert 'ATTRS{serial}=="TABLE1"' in rules
     assert 'GROUP="dthc"' in rules
     for text in (unit, rules):
         assert re.search(r"@[A-Z_]+@", text) is None
     assert (
-        _file(root, CONFIG_PATH).read_text()
+        staged(root, CONFIG_PATH).read_text()
         == (Path(install.__file__).parent / "templates" / "config.example.toml").read_text()
     )
-    assert _mode(_file(root, UNIT_PATH)) == 0o644
-    assert _mode(_file(root, RULES_PATH)) == 0o644
-    assert _mode(_file(root, CONFIG_PATH)) == 0o640
-    assert _mode(_file(root, "/etc/dthc-bridge")) == 0o750
+    assert file_mode(staged(root, UNIT_PATH)) == 0o644
+    assert file_mode(staged(root, RULES_PATH)) == 0o644
+    assert file_mode(staged(root, CONFIG_PATH)) == 0o640
+    assert file_mode(staged(root, "/etc/dthc-bridge")) == 0o750
     # Nothing touches the host from a staging root.
     assert "skip" in output
     assert "staging root" in output
@@ -113,7 +101,7 @@ def test_second_install_changes_nothing(root: Path, bin_dir: Path) -> None:
 
 def test_existing_config_is_never_overwritten(root: Path, bin_dir: Path) -> None:
     """An operator's tuned configuration survives every install."""
-    config = _file(root, CONFIG_PATH)
+    config = staged(root, CONFIG_PATH)
     config.parent.mkdir(parents=True)
     config.write_text('[board]\nlink = "/dev/ttyACM3"\n')
     assert _install(root, bin_dir)[0] == 0
@@ -128,7 +116,7 @@ def test_new_serial_rewrites_only_the_rules(root: Path, bin_dir: Path) -> None:
     assert code == 0
     assert f"write            {RULES_PATH}" in output
     assert f"unchanged        {UNIT_PATH}" in output
-    assert 'ATTRS{serial}=="X1"' in _file(root, RULES_PATH).read_text()
+    assert 'ATTRS{serial}=="X1"' in staged(root, RULES_PATH).read_text()
 
 
 def test_dry_run_lists_every_action_and_changes_nothing(root: Path, bin_dir: Path) -> None:
@@ -221,9 +209,9 @@ def test_uninstall_removes_unit_and_rules_but_keeps_config(root: Path, bin_dir: 
     assert _install(root, bin_dir)[0] == 0
     code, output = _uninstall(root)
     assert code == 0, output
-    assert not _file(root, UNIT_PATH).exists()
-    assert not _file(root, RULES_PATH).exists()
-    assert _file(root, CONFIG_PATH).exists()
+    assert not staged(root, UNIT_PATH).exists()
+    assert not staged(root, RULES_PATH).exists()
+    assert staged(root, CONFIG_PATH).exists()
     assert "--purge removes them" in output
     code, output = _uninstall(root)
     assert code == 0
@@ -233,12 +221,12 @@ def test_uninstall_removes_unit_and_rules_but_keeps_config(root: Path, bin_dir: 
 def test_uninstall_purge_removes_the_configuration(root: Path, bin_dir: Path) -> None:
     """--purge also removes /etc/dthc-bridge and /var/lib/dthc-bridge."""
     assert _install(root, bin_dir)[0] == 0
-    state = _file(root, "/var/lib/dthc-bridge")
+    state = staged(root, "/var/lib/dthc-bridge")
     state.mkdir(parents=True)
     (state / "stats.json").write_text("{}")
     code, output = _uninstall(root, purge=True)
     assert code == 0, output
-    assert not _file(root, "/etc/dthc-bridge").exists()
+    assert not staged(root, "/etc/dthc-bridge").exists()
     assert not state.exists()
     assert "skip             userdel dthc (staging root)" in output
 
@@ -296,11 +284,11 @@ def test_command_line_options(root: Path, bin_dir: Path) -> None:
          "--serial", "DN05ABCD", "--no-start"]
     )  # fmt: skip
     assert run_install(args) == 0
-    assert 'ATTRS{idVendor}=="0403"' in _file(root, RULES_PATH).read_text()
+    assert 'ATTRS{idVendor}=="0403"' in staged(root, RULES_PATH).read_text()
     assert run_install(parser.parse_args(["--root", str(root), "--vid", "12345"])) == 2
 
     parser = argparse.ArgumentParser()
     add_uninstall_arguments(parser)
     assert run_uninstall(parser.parse_args(["--root", str(root), "--purge"])) == 0
-    assert not _file(root, UNIT_PATH).exists()
-    assert not _file(root, CONFIG_PATH).exists()
+    assert not staged(root, UNIT_PATH).exists()
+    assert not staged(root, CONFIG_PATH).exists()
