@@ -105,7 +105,7 @@ class ThcSettings(_Closed):
 
 _NOT_SEQUENCE = frozenset(
     {"dialect", "plasma_mode_at_start", "materials_file", "materials_in_inches",
-     "default_cut_feed_mm_min", "codes"}
+     "default_cut_feed_mm_min", "codes", "consumables_file"}
 )  # fmt: skip
 
 
@@ -140,6 +140,9 @@ class ControllerSettings(_Closed):
     # no library (material 0, the default, only; material_set is refused).
     materials_file: Path | None = None
     materials_in_inches: bool = False  # the library's lengths and feeds are inches
+    # Pierce count and arc-on time (consumable life), kept across restarts. None: in the
+    # service's StateDirectory under systemd, else ~/.local/state/dthc-bridge/.
+    consumables_file: Path | None = None
     # Material 0 (the default): the default cut parameters with this cut feed.
     default_cut_feed_mm_min: float = Field(3000.0, gt=0.0, le=50_000.0)
     # A shop's own codes mapped to the daemon's ({"H1" = "M667"}): the sender and

@@ -24,7 +24,7 @@ from pydantic import BaseModel
 
 __all__ = ["WRITTEN_FILES", "PathProblem", "check_paths", "config_paths"]
 
-WRITTEN_FILES = frozenset({"controller.materials_file"})
+WRITTEN_FILES = frozenset({"controller.materials_file", "controller.consumables_file"})
 """Keys of files the daemon writes (replaced through a temporary in the same folder)."""
 
 

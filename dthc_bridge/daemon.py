@@ -20,6 +20,7 @@ import firmware_protocol as fp
 
 from .board import BoardClient
 from .config import ControllerConfigs, DaemonConfig
+from .consumables import ConsumableLog, default_consumables_file
 from .controller.dialect import Dialect
 from .controller.plasma import PlasmaController, default_material
 from .controller.sequence import CutSequence
@@ -73,6 +74,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
         dialect=Dialect(settings.dialect), materials=store, codes=settings.codes,
+        consumables=ConsumableLog(settings.consumables_file or default_consumables_file()),
     )  # fmt: skip
     return supervisor, service
 

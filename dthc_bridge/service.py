@@ -25,6 +25,7 @@ import structlog
 import firmware_protocol as fp
 
 from .board import BoardClient, Telemetry
+from .consumables import ConsumableLog
 from .controller import actions as act
 from .controller.commands import Abort, Command, CommandError, CycleStart, ThcHold
 from .controller.dialect import Dialect
@@ -62,6 +63,7 @@ TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers 
 EventListener = Callable[[ControllerEvent], None]
 MATERIAL_REQUESTS = frozenset({"materials", "material_get", "material_set", "material_delete"})
 _ENVELOPE = ("transaction", "deadline_ms")
+INPUT_NAMES = {bit.name.lower(): int(bit) for bit in fp.InputBit}
 HOST_SPEED_STALE_S = 0.45
 """A sender's ``motion`` report counts this long (board time): it polls its motion
 controller at 5-20 Hz, so this covers two report periods at 5 Hz (one missed report at 10
@@ -80,8 +82,13 @@ class ControllerService:
         dialect: Dialect = Dialect.MASSO,
         materials: MaterialStore | None = None,
         codes: Mapping[str, str] | None = None,
+        consumables: ConsumableLog | None = None,
     ) -> None:
         self.controller = controller
+        # Pierces and arc-on time (consumable life), counted from the board's batches.
+        self.consumables = consumables or ConsumableLog(None)
+        self._pierces_seen = controller.sequence.pierce_count
+        self._burning = False
         self.dialect = dialect  # of lines whose request names none
         self.codes = dict(codes or {})  # the shop's own codes, told to senders at program_start
         self.material_store = materials
@@ -102,6 +109,7 @@ class ControllerService:
         self._host_speed: tuple[float, float] | None = None
         self._board_has_xy = False  # it reported an XY speed of its own: the host's is moot
         self._last_batch: tuple[float, float, float | None] | None = None  # t, z, xy speed
+        self._last_io = (0, 0)  # the last batch's input snapshot and board status bits
         self._link: tuple[str, str] = (str(supervisor.state), "")
         self._torch_off: asyncio.Task[None] | None = None
         self._torch_off_sent_s = -math.inf
@@ -147,6 +155,12 @@ class ControllerService:
             return self._material_request(name, args)
         if name == "motion":
             return self._host_motion(args)
+        if name == "consumables_reset":
+            unknown = sorted(set(args) - set(_ENVELOPE))
+            if unknown:
+                return CommandResult(False, error=f"{name} {unknown[0]}: unknown argument")
+            await asyncio.to_thread(self.consumables.reset)
+            return CommandResult(True, {"consumables": self.consumables.counters.as_dict()})
         if name == "program_start":
             if self.sequence.busy:
                 return CommandResult(False, error=f"program_start: a cut is running "
@@ -246,6 +260,7 @@ class ControllerService:
     def snapshot(self) -> dict[str, object]:
         state = self.sequence.snapshot()
         state["board"] = self._link[0]
+        state["consumables"] = self.consumables.counters.as_dict()
         point = self.controller.last_resume_point
         state["resume_point"] = (
             None if point is None else {"line": point.line, "index": point.index}
@@ -274,6 +289,7 @@ class ControllerService:
             return None
         t, z_mm, xy = self._last_batch
         thc = self.sequence.thc
+        inputs, status = self._last_io
         return {
             "t": round(t, 4),
             "state": str(self.sequence.state),
@@ -282,17 +298,20 @@ class ControllerService:
             # While a steady slow-down is followed: the voltage it is held at.
             "slow_target_v": thc.slow_target_v,
             "z_mm": z_mm,
-            # Above the surface this cut probed (None between cuts): what the THC holds.
+            # Above the plate: the surface this cut probed, else the last one probed.
             "height_mm": self._height_mm(z_mm),
             "xy_speed_mm_s": xy,
             "locks": sorted(str(lock) for lock in thc.locks(t)),
+            # Raw levels, as the board's pins read them: the panel's input lights.
+            "inputs": {name: bool(inputs & (1 << bit)) for name, bit in INPUT_NAMES.items()},
+            "torch_on": bool(status & fp.StatusBit.TORCH_ON),
         }
 
     def _height_mm(self, z_mm: float) -> float | None:
-        cut = self.sequence.cut
-        if cut is None or math.isnan(cut.zero_mm) or math.isnan(z_mm):
+        surface = self.sequence.surface_mm
+        if surface is None or math.isnan(z_mm):
             return None
-        return round(z_mm - cut.zero_mm, 3)
+        return round(z_mm - surface, 3)
 
     def add_event_listener(self, listener: EventListener) -> None:
         """Every event, synchronously, as it happens."""
@@ -476,6 +495,8 @@ class ControllerService:
             # Only what the batch brought is kept here; telemetry() builds the point at the
             # MQTT rate, not at the sample rate.
             self._last_batch = (t_s, z_mm, xy)
+            self._last_io = (item.inputs, item.status)
+            self._count_consumables(item)
         elif isinstance(item, fp.Event):
             sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
         elif isinstance(item, fp.Fault):
@@ -483,6 +504,22 @@ class ControllerService:
             self._publish_event(BoardFaulted(t_s, name, item.faults))
             sequence.on_board_fault(name)
         self.pump()
+
+    def _count_consumables(self, batch: fp.Samples) -> None:
+        """A pierce per arc transfer; arc-on time while the relay is on and Arc OK reads;
+        saved (in a thread: the hot path never waits for a disk) when the arc goes out."""
+        counters = self.consumables
+        while self._pierces_seen < self.sequence.pierce_count:
+            self._pierces_seen += 1
+            counters.pierced()
+        burning = bool(batch.status & fp.StatusBit.TORCH_ON and batch.inputs & fp.InputMask.ARC_OK)
+        if burning:
+            counters.burned(len(batch.samples_cv) * batch.period_us / 1e6)
+        elif self._burning:
+            content = counters.pending()
+            if content is not None:
+                self._loop.run_in_executor(None, counters.write, content)
+        self._burning = burning
 
     def _on_handler_error(self, error: Exception) -> None:
         """A bug while handling board data (docs/DESIGN.md invariant 6): end the cut through
@@ -548,6 +585,7 @@ class ControllerService:
         """SIGTERM/SIGINT: abort any cut, torch off, Z velocity zero; bounded in time."""
         self.sequence.abort("daemon stopping")
         self.sequence.drain()
+        self.consumables.save()
         with contextlib.suppress(LinkError, asyncio.TimeoutError):
             self._send_velocity(0.0)
             await asyncio.wait_for(self.client.torch(False), 0.5)

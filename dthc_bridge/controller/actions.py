@@ -91,6 +91,9 @@ class PauseCause(StrEnum):
     FAULT = "fault"  # docs/DESIGN.md invariant 3: the cut ended through the fault path
     ARC_LOST = "arc_lost"  # the same, because the arc went out
     STOP_AFTER_PIERCE = "stop_after_pierce"  # G200 S1: waits for cycle start
+    # docs/DESIGN.md invariant 7: the operator paused a lit cut; the torch is out and raised,
+    # and the program resumes through the start sequence where the torch stands.
+    OPERATOR = "operator_pause"
 
 
 @dataclass(frozen=True, slots=True)

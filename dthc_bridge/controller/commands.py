@@ -18,12 +18,14 @@ __all__ = [
     "CycleStart",
     "DefineMaterial",
     "HeightOverride",
+    "JogZ",
     "LegacyMode",
     "OhmicTest",
     "OperatingMode",
     "PlasmaMode",
     "ProbeAndStart",
     "ProbeSurface",
+    "ProbeTest",
     "ProgramZMove",
     "Rearm",
     "ResumePoint",
@@ -209,9 +211,11 @@ class TorchEnable:
 @dataclass(frozen=True, slots=True)
 class SelectMaterial:
     """PlasmaC M190 P<n>: the material's cut parameters, feed and current; -1 = the
-    material in force before the program."""
+    material in force before the program. ``word``: what errors name (the panel's
+    ``material_select`` request); None: the M190 line."""
 
     number: int
+    word: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -280,7 +284,9 @@ class Abort:
 @dataclass(frozen=True, slots=True)
 class ThcHold:
     """The operator paused the program (``thc_hold`` request): Z holds while ``on``, without
-    changing M667/M666; a new cut starts released."""
+    changing M667/M666; a new cut starts released. A cut running when it comes (lit or in
+    its start sequence) is ended: torch off, safe height, the sender told to pause
+    (docs/DESIGN.md invariant 7)."""
 
     on: bool
 
@@ -288,6 +294,22 @@ class ThcHold:
 @dataclass(frozen=True, slots=True)
 class OhmicTest:
     """Switch ohmic sensing on with the torch in the air: contact means a shorted torch."""
+
+
+@dataclass(frozen=True, slots=True)
+class ProbeTest:
+    """The operator's probe test (``probe_test`` request, idle only): a touch-off where the
+    torch stands, as a cut's, then back to the Z it started from; the surface found is the
+    plate's (height above the plate reads from it)."""
+
+
+@dataclass(frozen=True, slots=True)
+class JogZ:
+    """The operator's Z jog (``jog_z`` request, idle only): ``mm`` up (+) or down (-) from
+    where Z is, inside the travel, at ``feed_mm_min`` (None: the set-up speed)."""
+
+    mm: float
+    feed_mm_min: float | None = None
 
 
 Command = (
@@ -310,6 +332,8 @@ Command = (
     | HeightOverride
     | ThcHold
     | OhmicTest
+    | ProbeTest
+    | JogZ
     | TorchEnable
     | SelectMaterial
     | DefineMaterial

@@ -77,12 +77,14 @@ from .commands import (
     CycleStart,
     DefineMaterial,
     HeightOverride,
+    JogZ,
     LegacyMode,
     OhmicTest,
     OperatingMode,
     PlasmaMode,
     ProbeAndStart,
     ProbeSurface,
+    ProbeTest,
     ProgramZMove,
     Rearm,
     ResumePoint,
@@ -697,6 +699,39 @@ def _ohmic_test(_name: str, _args: Mapping[str, object]) -> Command:
     return OhmicTest()
 
 
+def _probe_test(_name: str, _args: Mapping[str, object]) -> Command:
+    return ProbeTest()
+
+
+MAX_JOG_MM = 10.0
+MAX_JOG_FEED_MM_MIN = 3000.0
+
+
+def _jog_z(name: str, args: Mapping[str, object]) -> Command:
+    if "mm" not in args:
+        raise CommandError(f"{name} mm", "required argument is missing")
+    mm = _arg_number(f"{name} mm", args["mm"])
+    if mm == 0 or abs(mm) > MAX_JOG_MM:
+        raise CommandError(f"{name} mm", f"{mm:g} is not a step of 0 < |mm| <= {MAX_JOG_MM:g}")
+    feed = None
+    if "feed_mm_min" in args:
+        feed = check_range(
+            f"{name} feed_mm_min", _arg_number(f"{name} feed_mm_min", args["feed_mm_min"]),
+            1.0, MAX_JOG_FEED_MM_MIN,
+        )  # fmt: skip
+    return JogZ(mm, feed)
+
+
+def _material_select(name: str, args: Mapping[str, object]) -> Command:
+    """The panel's material selector: the next cut's material, as PlasmaC's M190 P<n>."""
+    if "number" not in args:
+        raise CommandError(f"{name} number", "required argument is missing")
+    number = _arg_number(f"{name} number", args["number"])
+    if number != int(number) or number < 0:
+        raise CommandError(f"{name} number", f"{number:g} is not a material number (0, 1, ...)")
+    return SelectMaterial(int(number), word=f"{name} number {int(number)}")
+
+
 def _operating_mode(name: str, args: Mapping[str, object]) -> Command:
     if "mode" not in args:
         raise CommandError(f"{name} mode", "required argument is missing")
@@ -725,6 +760,9 @@ _REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]],
     "abort": (frozenset(), _abort),
     "height_override": (frozenset({"mm", "reset"}), _height_override),
     "ohmic_test": (frozenset(), _ohmic_test),
+    "probe_test": (frozenset(), _probe_test),
+    "jog_z": (frozenset({"mm", "feed_mm_min"}), _jog_z),
+    "material_select": (frozenset({"number"}), _material_select),
     "operating_mode": (frozenset({"mode"}), _operating_mode),
     "velocity_reduction": (frozenset({"percent"}), _request_velocity_reduction),
 }

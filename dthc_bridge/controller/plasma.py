@@ -22,12 +22,14 @@ from .commands import (
     CycleStart,
     DefineMaterial,
     HeightOverride,
+    JogZ,
     LegacyMode,
     OhmicTest,
     OperatingMode,
     PlasmaMode,
     ProbeAndStart,
     ProbeSurface,
+    ProbeTest,
     ProgramZMove,
     Rearm,
     ResumePoint,
@@ -220,7 +222,7 @@ class PlasmaController:
         elif isinstance(command, TorchEnable):
             sequence.enable_torch(command.enabled)
         elif isinstance(command, SelectMaterial):
-            word = f"M190 P{command.number}"
+            word = command.word or f"M190 P{command.number}"
             try:
                 material = self.materials.get(
                     self.materials.initial if command.number == -1 else command.number,
@@ -272,13 +274,32 @@ class PlasmaController:
             sequence.abort("stopped by the operator")
             return Outcome(data={"aborted": busy})
         elif isinstance(command, ThcHold):
+            # A pause holds Z; a lit cut is ended (docs/DESIGN.md invariant 7), whoever asks.
             sequence.thc.held = command.on
-            return Outcome(data={"thc_held": command.on})
-        elif isinstance(command, OhmicTest):
-            if sequence.busy:
-                raise CommandError("ohmic_test", "not during a cut")
-            sequence.ohmic_test(now)
+            ended = command.on and sequence.pause(now, "paused by the operator")
+            return Outcome(data={"thc_held": command.on, "cut_ended": ended})
+        elif isinstance(command, OhmicTest | ProbeTest | JogZ):
+            return self._operator_test(command, now)
         return Outcome()
+
+    def _operator_test(self, command: OhmicTest | ProbeTest | JogZ, now: float) -> Outcome:
+        """The panel's ohmic test, probe test and Z jog: with the table idle only."""
+        sequence = self.sequence
+        name = {OhmicTest: "ohmic_test", ProbeTest: "probe_test", JogZ: "jog_z"}[type(command)]
+        if sequence.state is State.FAULTED:
+            raise CommandError(name, f"re-arm required after: {sequence.error}")
+        if sequence.busy:
+            raise CommandError(name, f"not during a cut ({sequence.state})")
+        if isinstance(command, OhmicTest):
+            sequence.ohmic_test(now)
+            return Outcome()
+        if isinstance(command, ProbeTest):
+            error = sequence.probe_test(now)
+        else:
+            error = sequence.jog_z(now, command.mm, command.feed_mm_min)
+        if error is not None:
+            raise CommandError(name, error)
+        return Outcome(deferred=True)
 
     def _define_material(self, comment: str) -> Outcome:
         word = f"({comment})"

@@ -29,7 +29,7 @@ from . import actions as act
 from .commands import CutParams, ThcMode
 from .thc import Lock, ThcController
 
-__all__ = ["CutSequence", "SequenceConfig", "State"]
+__all__ = ["IN_A_CUT", "CutSequence", "SequenceConfig", "State"]
 
 
 class State(StrEnum):
@@ -54,6 +54,16 @@ class State(StrEnum):
     OHMIC_TEST = "ohmic_test"
     Z_MOVE = "program_z_move"
     PROGRAM_PROBE = "program_probe"
+    PROBE_TEST = "probe_test"
+
+
+# From the M3 to the end of the cut: the states a pause ends (invariant 7). A cut's start
+# sequence is ended too, lit or not yet: its M3 is answered "paused" and sent again on resume.
+IN_A_CUT = frozenset({
+    State.TO_PROBE_HEIGHT, State.PROBING, State.CREEP_UP, State.TO_PIERCE, State.TORCH_ON,
+    State.ARC_WAIT, State.RETRY_DELAY, State.PIERCE_DELAY, State.S1_RAISE, State.S1_WAIT,
+    State.S1_LOWER, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT, State.CUTTING, State.PAUSE_AT_END,
+})  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -178,6 +188,8 @@ class CutSequence:
         self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
         self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
         self._probe_requires_contact = True
+        self._test_return_mm = math.nan  # a probe test goes back to this Z
+        self._test_error = ""  # a probe test without contact: the answer once back
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -207,7 +219,7 @@ class CutSequence:
 
     def snapshot(self) -> dict[str, Any]:
         p = self.params
-        cut = self.cut
+        surface = self.surface_mm
         return {
             "state": str(self.state),
             "mode": int(self.mode),
@@ -219,9 +231,9 @@ class CutSequence:
             "slow_target_v": self.thc.slow_target_v,
             "voltage_v": self.thc.filtered_v,
             "z_mm": None if math.isnan(self._z_mm) else round(self._z_mm, 3),
-            "height_mm": (
-                None if cut is None or math.isnan(self._z_mm - cut.zero_mm)
-                else round(self._z_mm - cut.zero_mm, 3)
+            "height_mm": (  # above the plate (surface_mm)
+                None if surface is None or math.isnan(self._z_mm)
+                else round(self._z_mm - surface, 3)
             ),
             "locks": sorted(str(lock) for lock in self.thc.locks(self.now)),
             "probe_required": self.probe_required,
@@ -360,12 +372,71 @@ class CutSequence:
             self._move(self._cut_z(), self.config.setup_speed_mm_s)
 
     def rearm(self, now: float) -> None:
-        """Leave FAULTED explicitly (the operator has seen the error); touch-off will follow."""
+        """Leave FAULTED explicitly (the operator has seen the error, which is then cleared);
+        touch-off will follow."""
         self.now = now
         if self.state is State.FAULTED:
             self._emit(act.ResetFaults())
             self._enter(State.IDLE)
             self.probe_required = True
+            self.error = ""
+
+    def pause(self, now: float, reason: str) -> bool:
+        """The operator paused the program (docs/DESIGN.md invariant 7): a cut, lit or in its
+        start sequence, ends now: torch off, Z held then raised to safe height, the sender
+        told to pause (every sender holds its motion); its waiting M3 is answered with the
+        reason. Not a fault: nothing to re-arm. The resume touches off again where the
+        torch then stands. False (nothing done) when no cut runs."""
+        self.now = now
+        if self.state not in IN_A_CUT:
+            return False
+        cut = self.cut
+        if cut is not None and self.state is State.CUTTING:
+            self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
+        self.probe_required = True
+        self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0), act.SwitchOhmicSense(False))
+        if cut is not None and not math.isnan(cut.zero_mm):
+            self._update_safe_z()
+        self._reply(False, f"paused: {reason}")
+        self._enter(State.TO_SAFE)
+        self._move(self._raised_z(), self.config.setup_speed_mm_s)
+        self._emit(act.PauseProgram(reason, act.PauseCause.OPERATOR))
+        return True
+
+    def _raised_z(self) -> float:
+        """Safe height, or where Z is if higher, below the top margin."""
+        z = self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm
+        return min(max(self.safe_z_mm, z), self.config.z_max_mm - self.config.top_margin_mm)
+
+    def probe_test(self, now: float) -> str | None:
+        """The operator's probe test, idle: touch off where the torch stands (the cut's
+        sensors and feed), then back to the Z it started from; the surface found becomes
+        the plate's. Answered (CommandReply) once back; returns why not instead."""
+        self.now = now
+        if math.isnan(self._z_mm):
+            return "the torch's Z is not known yet (is the board online?)"
+        travel = self._z_mm - self.config.z_min_mm
+        if travel <= 0.5:
+            return "the torch is at the bottom of its travel"
+        self._test_return_mm = self._z_mm
+        self._test_error = ""
+        self._pending_reply = "probe_test"
+        self._enter(State.PROBE_TEST)
+        ohmic = self.params.ohmic
+        if ohmic:
+            self._emit(act.SwitchOhmicSense(True))
+        self._emit(act.ProbeZ(self.params.touch_feed_mm_min / 60.0, travel, ohmic, True))
+        return None
+
+    def jog_z(self, now: float, mm: float, feed_mm_min: float | None) -> str | None:
+        """The operator's Z jog, idle: ``mm`` from where Z is (inside the travel); answered
+        when done. Returns why not instead."""
+        if math.isnan(self._z_mm):
+            return "the torch's Z is not known yet (is the board online?)"
+        setup = self.config.setup_speed_mm_s
+        feed = setup if feed_mm_min is None else min(feed_mm_min / 60.0, setup)
+        self._test_error = ""
+        return self.move_z(now, self._z_mm + mm, feed)
 
     def ohmic_test(self, now: float) -> None:
         """Ohmic sense on with the torch in the air: contact means a shorted torch."""
@@ -385,6 +456,15 @@ class CutSequence:
         if self.last_zero_mm is not None:
             return self.last_zero_mm
         return self.config.z_min_mm + self.config.probe_height_mm
+
+    @property
+    def surface_mm(self) -> float | None:
+        """Machine Z of the plate under the torch: the surface this cut probed (or its datum),
+        else the last one probed; None before any touch-off."""
+        cut = self.cut
+        if cut is not None and not math.isnan(cut.zero_mm):
+            return cut.zero_mm
+        return self.last_zero_mm
 
     @property
     def in_relay_cut(self) -> bool:
@@ -525,6 +605,18 @@ class CutSequence:
     def on_probe_done(
         self, contact: bool, ohmic: bool, contact_z_mm: float, stop_z_mm: float
     ) -> None:
+        if self.state is State.PROBE_TEST:
+            self._z_mm = stop_z_mm
+            if self.params.ohmic:
+                self._emit(act.SwitchOhmicSense(False))
+            if contact:
+                offset = self.config.ohmic_offset_mm if ohmic else self.config.float_travel_mm
+                self.last_zero_mm = contact_z_mm + offset
+            else:
+                self._test_error = "no contact while probing (plate missing or Z min reached)"
+            self._enter(State.Z_MOVE)  # back where it started; answered there
+            self._move(self._test_return_mm, self.config.setup_speed_mm_s)
+            return
         if self.state is State.PROGRAM_PROBE:
             self._z_mm = stop_z_mm
             if self.params.ohmic:
@@ -587,7 +679,9 @@ class CutSequence:
         if state is State.Z_MOVE or (state is State.CUTTING and self._pending_reply == "Z"):
             if state is State.Z_MOVE:
                 self._enter(State.IDLE)
-            self._reply(reached, "" if reached else f"Z stopped at {z_mm:.3f} mm")
+            error = self._test_error or ("" if reached else f"Z stopped at {z_mm:.3f} mm")
+            self._test_error = ""
+            self._reply(not error, error)
             return
         if state is State.TO_PROBE_HEIGHT:
             assert self.cut is not None

@@ -31,7 +31,7 @@ from dthc_bridge.materials.library import (
     parse_material_file,
 )
 
-__all__ = ["MaterialStore"]
+__all__ = ["MaterialStore", "write_atomically"]
 
 _NEW_FILE_MODE = 0o644
 _TEMP_SUFFIX = ".tmp"
@@ -110,7 +110,7 @@ class MaterialStore:
         except FileNotFoundError:
             mode = _NEW_FILE_MODE
         self._remove_stale_temporaries(target)
-        _write_atomically(target, text.encode("utf-8"), mode)
+        write_atomically(target, text.encode("utf-8"), mode)
         self._materials = {n: m for n, m in materials.items() if not m.temporary}
 
     def _loaded(self) -> dict[int, Material]:
@@ -133,7 +133,7 @@ def _temp_prefix(target: Path) -> str:
     return f".{target.name}."
 
 
-def _write_atomically(target: Path, data: bytes, mode: int) -> None:
+def write_atomically(target: Path, data: bytes, mode: int) -> None:
     """Write ``data`` to ``target`` so that a crash leaves the old or the new content."""
     directory = target.parent
     # Beside the target (same file system, so the rename is atomic); created 0600, O_EXCL.

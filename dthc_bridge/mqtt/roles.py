@@ -40,7 +40,9 @@ REQUESTS: dict[str, bool] = {
     "height_override": True,
     "thc": True,
     "thc_hold": True,
-    "ohmic_test": True,
+    "ohmic_test": True,  # energises the ohmic circuit on the torch
+    "probe_test": True,
+    "jog_z": True,
     "operating_mode": True,
     "velocity_reduction": True,
     "motion": True,  # the anti-dive speed: a forged 0 or a forged full speed moves Z
@@ -54,6 +56,10 @@ REQUESTS: dict[str, bool] = {
     "material_get": False,
     "material_set": False,  # the next cut's parameters, validated; the sender selects them
     "material_delete": False,
+    # The panel's material selector: the next cut's parameters from the library, as an M190
+    # in the program would choose them; validated, and a program's own M190 comes after it.
+    "material_select": False,
+    "consumables_reset": False,  # the pierce count and arc-on time start again from zero
 }
 
 PANEL_REQUESTS = frozenset(name for name, moves in REQUESTS.items() if not moves)
@@ -87,6 +93,7 @@ def grants(role: Role) -> list[Grant]:
             Grant("write", "request/#"),
             Grant("readwrite", "sender/availability"),
             Grant("readwrite", "sender/progress"),
+            Grant("readwrite", "sender/path"),
             Grant("readwrite", "sender/response/#"),
             Grant("read", "#"),
         ]

@@ -310,6 +310,8 @@ class Stack:
             f'[logging]\nlevel = "info"\njson_logs = true\n'
         )
         controller = dict(self.options.controller)
+        # The stack's own counters: a demo's pierces are not the table's consumables.
+        controller.setdefault("consumables_file", str(self.workdir / "consumables.json"))
         if self.options.materials_file is not None:
             controller["materials_file"] = str(self.options.materials_file)
         if controller:

@@ -93,6 +93,7 @@ SECTIONS = {
             "dialect": "the ControllerService's default dialect, not the sequence's",
             "plasma_mode_at_start": "CutSequence.plasma_mode at start (daemon.build_service)",
             "materials_file": "the MaterialStore the service writes",
+            "consumables_file": "the ConsumableLog the service counts pierces and arc time in",
             "materials_in_inches": "PlasmaController.inch_materials",
             "default_cut_feed_mm_min": "PlasmaController.default_material (material 0)",
             "codes": "the sender's code table, given at program_start",

@@ -82,7 +82,7 @@ async def test_thc_hold_locks_until_released_and_a_new_cut_starts_released(
     thc = service.sequence.thc
     result = await service.execute_request("thc_hold", {"on": True})
     assert result.ok
-    assert result.data == {"thc_held": True}
+    assert result.data == {"thc_held": True, "cut_ended": False}
     assert Lock.HELD in thc.locks(0.0)
     assert (await service.execute_request("thc_hold", {"on": False})).ok
     assert Lock.HELD not in thc.locks(0.0)
