@@ -11,6 +11,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from .labels import state_label
+
 __all__ = ["CONTROLS", "Control", "ControlError", "LiveView", "enabled", "route"]
 
 TORCH_STEP_V = 1.0
@@ -20,11 +22,18 @@ IDLE_STATES = frozenset({"idle", "faulted"})
 PAUSED_CONTROLS = frozenset(
     {"path_back", "path_forward", "recovery_offset", "resume_here", "restart_cut"}
 )
+# Tests and jogs of an idle torch: the sender forwards them only while its program is not
+# running (stopped, or paused by the operator), the daemon only outside a cut.
+IDLE_TORCH = frozenset({"ohmic_test", "probe_test", "jog_up", "jog_down"})
 # Forwarded by an online sender (running, or waiting for the operator after an error).
 VIA_SENDER = frozenset(
-    {"torch_up", "torch_down", "height_up", "height_down", "thc_on", "thc_off", "rearm"}
-)
+    {"torch_up", "torch_down", "height_up", "height_down", "thc_on", "thc_off", "rearm",
+     *IDLE_TORCH}
+)  # fmt: skip
 NO_SENDER = "no sender is online (the panel reaches the torch only through the sender)"
+PROGRAM_RUNS = "the program is running (pause it first)"
+JOG_MAX_MM = 10.0  # one jog press at most (the daemon's bound)
+JOG_STEP_MM = 1.0
 
 
 class ControlError(Exception):
@@ -102,6 +111,21 @@ def _offset(given: Mapping[str, Any]) -> dict[str, Any]:
     return {key: given[key] for key in ("x_mm", "y_mm", "feed_mm_min") if key in given}
 
 
+def _jog(sign: float) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    """Z up (+) or down (-) by ``mm`` (the page's step, 0 to JOG_MAX_MM), at its feed."""
+
+    def args(given: Mapping[str, Any]) -> dict[str, Any]:
+        mm = given.get("mm", JOG_STEP_MM)
+        if isinstance(mm, bool) or not isinstance(mm, int | float) or not 0 < mm <= JOG_MAX_MM:
+            raise ControlError(f"jog mm: {mm!r} must be a distance of 0 to {JOG_MAX_MM:g} mm")
+        out: dict[str, Any] = {"mm": sign * float(mm)}
+        if "feed_mm_min" in given:
+            out["feed_mm_min"] = given["feed_mm_min"]  # the daemon checks it
+        return out
+
+    return args
+
+
 def _material_number(args: Mapping[str, Any]) -> dict[str, Any]:
     if "number" not in args:
         raise ControlError("material number: required")
@@ -129,6 +153,13 @@ CONTROLS: dict[str, Control] = {
     "restart_cut": Control("sender", "restart", _none),
     "material_set": Control("daemon", "material_set", _material, needs_board=False),
     "material_delete": Control("daemon", "material_delete", _material_number, needs_board=False),
+    # The next cut's material (a program's own G200 or material change still wins).
+    "material_select": Control("daemon", "material_select", _material_number, needs_board=False),
+    "consumables_reset": Control("daemon", "consumables_reset", _none, needs_board=False),
+    "ohmic_test": Control("sender", "ohmic_test", _none),
+    "probe_test": Control("sender", "probe_test", _none),
+    "jog_up": Control("sender", "jog_z", _jog(+1.0)),
+    "jog_down": Control("sender", "jog_z", _jog(-1.0)),
 }
 
 
@@ -161,6 +192,12 @@ def _state_reason(name: str, view: LiveView) -> str | None:
         return None if view.running or sequence not in IDLE_STATES else "nothing runs"
     if name == "rearm":
         return None if sequence == "faulted" else "nothing to re-arm (no fault)"
+    if name in IDLE_TORCH:
+        if view.running and not progress.get("operator_paused"):
+            return PROGRAM_RUNS
+        if sequence not in IDLE_STATES:
+            return f"the torch is busy: {state_label(sequence).lower()}"
+        return None
     if name in PAUSED_CONTROLS:
         if view.paused_at is not None:
             if name == "restart_cut" and not progress.get("restart_line"):

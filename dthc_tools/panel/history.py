@@ -44,8 +44,13 @@ class CutRecord:
     pierce_s: float | None = None  # arc OK -> the pierce delay over (motion starts)
     arc_on_s: float = 0.0  # arc burning, summed over the cut (a G200 S1 stop relights)
     target_v: float | None = None  # the THC's target in force at the end
-    height_rms_mm: float | None = None  # measured height vs the cut height, while cutting
-    height_max_mm: float | None = None  # the largest such deviation
+    # The headline: arc voltage minus the THC's target, RMS, while cutting with the THC in
+    # control (no lock): the THC's tracking error, which a warped sheet does not inflate.
+    volts_rms_v: float | None = None
+    # Height above the point probed at the cut's start minus the cut height, RMS and max,
+    # while cutting: on a warped sheet this includes the warp the THC follows on purpose.
+    height_rms_mm: float | None = None
+    height_max_mm: float | None = None
     cut_height_mm: float | None = None
     locks: dict[str, int] = field(default_factory=dict)  # telemetry points with each lock
     error: str = ""  # the fault that ended it, if one did
@@ -94,6 +99,7 @@ class CutRecorder:
         self._arc_ok_t: float | None = None
         self._context: dict[str, Any] = {}  # line, program, material, cut height
         self._deviations: list[float] = []
+        self._volt_errors: list[float] = []
 
     def set_context(self, **context: Any) -> None:
         """What the next record starts with: the sender's line and program, the material
@@ -121,6 +127,14 @@ class CutRecorder:
             and cut_height is not None
         ):
             self._deviations.append(float(height) - cut_height)
+        volts = point.get("voltage_v")
+        if (
+            point.get("state") == "cutting"
+            and isinstance(volts, int | float)
+            and isinstance(target, int | float)
+            and locks == []
+        ):
+            self._volt_errors.append(float(volts) - float(target))
 
     def on_sequence(self, event: Mapping[str, Any]) -> CutRecord | None:
         state, t = str(event.get("state")), event.get("t")
@@ -168,6 +182,7 @@ class CutRecorder:
         )  # fmt: skip
         self._arc_on_since = self._torch_on_t = self._arc_ok_t = None
         self._deviations = []
+        self._volt_errors = []
 
     def _close_arc(self, t: float) -> None:
         if self._arc_on_since is not None and self.current is not None:
@@ -177,9 +192,14 @@ class CutRecorder:
     def _finish_stats(self, record: CutRecord) -> None:
         deviations = self._deviations
         if deviations:
-            record.height_rms_mm = round(math.sqrt(sum(d * d for d in deviations)
-                                                   / len(deviations)), 3)  # fmt: skip
+            record.height_rms_mm = round(_rms(deviations), 3)
             record.height_max_mm = round(max(abs(d) for d in deviations), 3)
+        if self._volt_errors:
+            record.volts_rms_v = round(_rms(self._volt_errors), 2)
+
+
+def _rms(values: list[float]) -> float:
+    return math.sqrt(sum(v * v for v in values) / len(values))
 
 
 class CutHistory:

@@ -18,6 +18,7 @@ from dthc_tools.sender.daemon_client import DaemonClient
 
 from .controls import ControlError, LiveView, enabled, route
 from .history import CutHistory, CutRecorder
+from .labels import describe_params
 
 __all__ = ["PanelHub"]
 
@@ -35,11 +36,13 @@ class PanelHub:
         self.view = LiveView()
         self._pages: set[asyncio.Queue[str]] = set()
         self._last_view = ""
+        self.path: dict[str, Any] | None = None  # the running program's toolpath (sender/path)
         client.on_topic("state", self._on_state)
         client.on_topic("board", self._on_board)
         client.on_topic("materials", self._on_materials)
         client.on_topic("sender/availability", self._on_sender)
         client.on_topic("sender/progress", self._on_progress)
+        client.on_topic("sender/path", self._on_path)
         client.on_topic("sender/response/+", client.answer)
         client.on_telemetry(self._on_telemetry)
         client.on_event(self._on_event)
@@ -72,6 +75,11 @@ class PanelHub:
             self.recorder.set_context(line=document.get("line"), program=document.get("program"))
         self._push_view()
 
+    def _on_path(self, _topic: str, document: dict[str, Any]) -> None:
+        """A program's toolpath, once per program start: the preview draws it."""
+        self.path = document if isinstance(document.get("moves"), list) else None
+        self._push("path", self.path or {})
+
     def _on_telemetry(self, point: dict[str, Any]) -> None:
         self.recorder.on_telemetry(point)
         self._push("telemetry", point)
@@ -95,6 +103,7 @@ class PanelHub:
             "state": view.state, "sender": view.sender,
             "progress": view.progress if view.sender else None,
             "materials": view.materials, "controls": enabled(view),
+            "params_shown": describe_params((view.state or {}).get("params")),
         }  # fmt: skip
 
     def _push_view(self) -> None:
@@ -116,6 +125,8 @@ class PanelHub:
         """An open page's stream: the view now, then every message as it comes."""
         queue: asyncio.Queue[str] = asyncio.Queue(PAGE_QUEUE)
         queue.put_nowait(json.dumps({"kind": "view", "data": self.snapshot()}))
+        if self.path is not None:
+            queue.put_nowait(json.dumps({"kind": "path", "data": self.path}))
         self._pages.add(queue)
         try:
             yield queue

@@ -3,6 +3,8 @@
     GET  /                       the page (static HTML, CSS and our own JavaScript)
     GET  /events                 server-sent events: {"kind": "view"|"telemetry"|..., "data"}
     GET  /api/view               the live view now (links, state, progress, controls enabled)
+    GET  /api/labels             the operator's words for states, inputs, parameters, figures
+    GET  /api/path               the running program's toolpath (the sender's), or {}
     GET  /api/cuts               the cut history, newest last (summaries)
     GET  /api/cuts/{n}           one cut with its trace;  /api/cuts/{n}.csv  as CSV
     POST /api/control/{name}     press a control: {"ok": true, "data"} or {"ok": false, "error"}
@@ -43,6 +45,7 @@ from .http_guard import (
     parse_json_body,
 )
 from .hub import PanelHub
+from .labels import labels_document
 
 __all__ = ["PANEL_HEADER", "PanelLimits", "build_app"]
 
@@ -113,6 +116,14 @@ def build_app(
     @routes.get("/api/view")
     async def view(_request: web.Request) -> web.Response:
         return web.json_response({**hub.snapshot(), "token_required": token is not None})
+
+    @routes.get("/api/labels")
+    async def labels(_request: web.Request) -> web.Response:
+        return web.json_response(labels_document())
+
+    @routes.get("/api/path")
+    async def path(_request: web.Request) -> web.Response:
+        return web.json_response(hub.path or {})
 
     @routes.get("/events")
     async def events(request: web.Request) -> web.StreamResponse:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import pytest
@@ -40,7 +41,7 @@ def test_offline_disables_every_control_with_the_reason() -> None:
         (LiveView(broker=True, daemon=True, board="offline"), "the board is offline"),
     ]:
         reasons = enabled(view)
-        board_free = {"material_set", "material_delete"}
+        board_free = {"material_set", "material_delete", "material_select", "consumables_reset"}
         for name in CONTROLS:
             if name in board_free and reason == "the board is offline":
                 continue  # the library is the daemon's: it is edited without the board
@@ -48,12 +49,13 @@ def test_offline_disables_every_control_with_the_reason() -> None:
 
 
 def test_what_an_idle_table_allows() -> None:
-    assert allowed(online()) == {"material_set", "material_delete"}
+    library = {"material_set", "material_delete", "material_select", "consumables_reset"}
+    assert allowed(online()) == library
     waiting = online()
     waiting.sender = True  # a sender waits for the operator
     assert allowed(waiting) == {
-        "torch_up", "torch_down", "height_up", "height_down", "thc_on", "material_set",
-        "material_delete",
+        "torch_up", "torch_down", "height_up", "height_down", "thc_on", "ohmic_test",
+        "probe_test", "jog_up", "jog_down", *library,
     }  # fmt: skip
     assert enabled(online())["cycle_start"] == "nothing waits for cycle start"
     assert enabled(waiting)["rearm"] == "nothing to re-arm (no fault)"
@@ -67,7 +69,8 @@ def test_torch_and_height_controls_go_through_the_sender_never_to_the_daemon() -
     """The broker lets only the sender's user send requests that can light the torch or
     move Z: every such control is routed to the sender, and none reaches the daemon."""
     for name in ("torch_up", "torch_down", "height_up", "height_down", "thc_on", "thc_off",
-                 "rearm", "cycle_start", "pause"):  # fmt: skip
+                 "rearm", "cycle_start", "pause", "ohmic_test", "probe_test", "jog_up",
+                 "jog_down"):  # fmt: skip
         assert route(name, {}, running())[0] == "sender", name
         with pytest.raises(ControlError):
             route(name, {}, online("s1_wait_cycle_start"))  # no sender: nothing is sent
@@ -130,3 +133,50 @@ def test_paused_motion_is_offered_while_a_program_is_paused_and_goes_to_the_send
     gone.sender = False
     with pytest.raises(ControlError, match="resume_here: no sender is online"):
         route("resume_here", {}, gone)
+
+
+def test_tests_and_jogs_go_through_the_sender_and_only_while_no_program_runs() -> None:
+    """Ohmic test, probe test and Z jog move Z or energise the torch circuit: they go to the
+    sender (which forwards them), never to the daemon; the page disables them with the
+    reason while a program runs unpaused or the torch is busy, and without a sender."""
+    idle = online()
+    idle.sender = True
+    assert route("ohmic_test", {}, idle) == ("sender", "ohmic_test", {})
+    assert route("probe_test", {}, idle) == ("sender", "probe_test", {})
+    assert route("jog_up", {"mm": 2}, idle) == ("sender", "jog_z", {"mm": 2.0})
+    assert route("jog_down", {"mm": 0.5, "feed_mm_min": 600}, idle) == (
+        "sender", "jog_z", {"mm": -0.5, "feed_mm_min": 600},
+    )  # fmt: skip
+    assert route("jog_down", {}, idle) == ("sender", "jog_z", {"mm": -1.0})
+    for bad in (0, -1, 10.5, True, "3"):
+        with pytest.raises(ControlError, match=r"jog mm: .* must be a distance of 0 to 10 mm"):
+            route("jog_up", {"mm": bad}, idle)
+    with pytest.raises(ControlError, match=re.escape(NO_SENDER)):
+        route("ohmic_test", {}, online())
+    for name in ("ohmic_test", "probe_test", "jog_up", "jog_down"):
+        assert enabled(online())[name] == NO_SENDER
+        assert enabled(running())[name] == "the program is running (pause it first)"
+        assert enabled(running(waiting_cycle_start=True))[name] == (
+            "the program is running (pause it first)"
+        )
+        paused_cutting = running(operator_paused=True)  # the torch still going up
+        assert enabled(paused_cutting)[name] == "the torch is busy: cutting"
+        paused_idle = running(operator_paused=True)
+        paused_idle.state = {"state": "idle"}
+        assert enabled(paused_idle)[name] is None
+
+
+def test_material_select_and_consumables_reset_go_to_the_daemon_without_a_board() -> None:
+    """Choosing the next cut's material and resetting the consumables' counters light
+    nothing: the panel sends them to the daemon itself, board or no board."""
+    board_gone = LiveView(broker=True, daemon=True, board="offline")
+    assert enabled(board_gone)["material_select"] is None
+    assert enabled(board_gone)["consumables_reset"] is None
+    assert route("material_select", {"number": 3, "x": 1}, board_gone) == (
+        "daemon", "material_select", {"number": 3},
+    )  # fmt: skip
+    assert route("consumables_reset", {"anything": 1}, board_gone) == (
+        "daemon", "consumables_reset", {},
+    )  # fmt: skip
+    with pytest.raises(ControlError, match="material number: required"):
+        route("material_select", {}, board_gone)

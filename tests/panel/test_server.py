@@ -243,3 +243,47 @@ async def test_listening_beyond_localhost_needs_a_token(
         err = capsys.readouterr().err
         assert reason in err, err
         assert err.count("\n") == 1
+
+
+PATH = {"program": "part.nc", "bounds": [0, 0, 300, 200], "moves": [
+    {"cut": None, "line": 5, "points": [[0, 0], [50, 100]]},
+    {"cut": 0, "line": 7, "points": [[50, 100], [300, 100]]},
+]}  # fmt: skip
+
+
+async def test_the_toolpath_reaches_open_pages_and_new_ones(
+    client: TestClient[Any, Any], hub: RecordingHub
+) -> None:
+    """The sender's ``sender/path`` (retained, once per program) goes to every open page as
+    it comes, to a page opened later right after the view, and is served on /api/path."""
+    assert await (await client.get("/api/path")).json() == {}
+    async with hub.page() as queue:
+        hub._on_path("dthc/table1/sender/path", PATH)
+        kinds = [json.loads(queue.get_nowait())["kind"] for _ in range(queue.qsize())]
+        assert kinds == ["view", "path"]
+    assert await (await client.get("/api/path")).json() == PATH
+    response = await client.get("/events")
+    messages = [json.loads((await response.content.readline())[len(b"data: ") :])]
+    await response.content.readline()  # the blank line between events
+    messages.append(json.loads((await response.content.readline())[len(b"data: ") :]))
+    assert [m["kind"] for m in messages] == ["view", "path"]
+    assert messages[1]["data"] == PATH
+    response.close()
+    hub._on_path("dthc/table1/sender/path", {"program": "bad"})  # no moves: no preview
+    assert hub.path is None
+
+
+async def test_the_page_gets_the_operators_words(
+    client: TestClient[Any, Any], hub: RecordingHub
+) -> None:
+    """/api/labels: the words for states, inputs and figures; every view carries the
+    parameters in force already worded."""
+    labels = await (await client.get("/api/labels")).json()
+    assert labels["states"]["s1_wait_cycle_start"] == "Waiting for cycle start (S1)"
+    assert labels["inputs"]["estop"] == "E-stop"
+    hub._on_state("dthc/table1/state", {"state": "idle", "params": {
+        "touch_feed_mm_min": 300.0, "cut_voltage_v": None}})  # fmt: skip
+    shown = hub.snapshot()["params_shown"]
+    assert [(row["label"], row["text"]) for row in shown] == [
+        ("Touch-off feed", "300 mm/min"), ("Cut voltage", "auto"),
+    ]  # fmt: skip
