@@ -18,6 +18,8 @@ __all__ = [
     "DEFAULT_ZVEL_EXPIRY_MS",
     "DELIMITER",
     "HOST_WINDOW",
+    "LEASE_DETAIL_IDLE",
+    "LEASE_DETAIL_LATCHED",
     "LEASE_MAX_MS",
     "LEASE_MIN_MS",
     "MAX_BATCH_SIZE",
@@ -43,7 +45,7 @@ __all__ = [
 ]
 
 PROTOCOL_MAJOR: Final = 1
-PROTOCOL_MINOR: Final = 0
+PROTOCOL_MINOR: Final = 1  # 1.1: the idle lease lapse (PROTOCOL.md §4)
 
 DELIMITER: Final = 0x00
 # Decoded frame = type(1) seq(1) payload(0..MAX_PAYLOAD) crc(2).
@@ -62,6 +64,11 @@ MAX_BATCH_SIZE: Final = 100
 DEFAULT_LEASE_MS: Final = 250
 LEASE_MIN_MS: Final = 20
 LEASE_MAX_MS: Final = 2000
+# FAULT(LEASE_EXPIRED).detail (PROTOCOL.md §4-§5): the lease ran out with the torch, ohmic
+# sensing or Z in use, the fault latched (until FAULT_RESET); or it ran out with the board
+# at rest: reported once per lapse, nothing latched, the next valid host frame renews it.
+LEASE_DETAIL_LATCHED: Final = 0
+LEASE_DETAIL_IDLE: Final = 1
 DEFAULT_ZVEL_EXPIRY_MS: Final = 20
 ZVEL_EXPIRY_MAX_MS: Final = 200
 # The host keeps at most this many sequenced commands unacknowledged; the board remembers

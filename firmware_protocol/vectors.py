@@ -18,6 +18,8 @@ from . import messages as m
 from .codec import encode, encode_frame, encode_message
 from .constants import (
     CRC_CHECK_VALUE,
+    LEASE_DETAIL_IDLE,
+    LEASE_DETAIL_LATCHED,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     XY_SPEED_UNKNOWN,
@@ -163,8 +165,19 @@ def message_cases() -> list[tuple[str, m.Message]]:
         (
             "fault_lease_expired",
             m.Fault(
-                0, 9, 3_000_000, FaultCode.LEASE_EXPIRED, 0, 1 << FaultCode.LEASE_EXPIRED, 21_500
+                0,
+                9,
+                3_000_000,
+                FaultCode.LEASE_EXPIRED,
+                LEASE_DETAIL_LATCHED,
+                1 << FaultCode.LEASE_EXPIRED,
+                21_500,
             ),
+        ),
+        (
+            # The lease ran out with the board at rest: reported, nothing latched (faults 0).
+            "fault_lease_idle_lapse",
+            m.Fault(0, 10, 4_000_000, FaultCode.LEASE_EXPIRED, LEASE_DETAIL_IDLE, 0, 60_000),
         ),
         ("motion_done_reached", m.MotionDone(7, MotionResult.REACHED, 25_000, 4_000_000)),
         (

@@ -1,5 +1,5 @@
 /*
- * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.0.
+ * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.1.
  *
  * Normative spec: firmware_protocol/PROTOCOL.md. Golden vectors:
  * firmware_protocol/vectors/frames.json (checked by tests/firmware_protocol/test_c_codec.py).
@@ -63,7 +63,7 @@ extern "C" {
 /* --- numbers (PROTOCOL.md sections 1-4, 8; firmware_protocol/constants.py) ------------- */
 
 #define DTHC_PROTOCOL_MAJOR 1
-#define DTHC_PROTOCOL_MINOR 0
+#define DTHC_PROTOCOL_MINOR 1 /* 1.1: the idle lease lapse (PROTOCOL.md section 4) */
 
 #define DTHC_DELIMITER 0x00
 /* Decoded frame = type(1) seq(1) payload(0..DTHC_MAX_PAYLOAD) crc(2). */
@@ -97,6 +97,11 @@ extern "C" {
 #define DTHC_DEFAULT_LEASE_MS 250
 #define DTHC_LEASE_MIN_MS 20
 #define DTHC_LEASE_MAX_MS 2000
+/* FAULT(LEASE_EXPIRED).detail (PROTOCOL.md sections 4-5): the lease ran out with the torch,
+ * ohmic sensing or Z in use, the fault latched (until FAULT_RESET); or it ran out with the
+ * board at rest: reported once per lapse, nothing latched, the next valid frame renews it. */
+#define DTHC_LEASE_DETAIL_LATCHED 0
+#define DTHC_LEASE_DETAIL_IDLE 1
 #define DTHC_DEFAULT_ZVEL_EXPIRY_MS 20
 #define DTHC_ZVEL_EXPIRY_MIN_MS 1
 #define DTHC_ZVEL_EXPIRY_MAX_MS 200

@@ -191,8 +191,9 @@ async def test_other_protocol_major_is_refused_with_a_clear_error(rig: Rig) -> N
             break
         await asyncio.sleep(0.01)
     assert rig.supervisor.state is LinkState.INCOMPATIBLE
-    assert "protocol 2.0" in rig.supervisor.last_error
-    assert "1.0" in rig.supervisor.last_error
+    host = f"{fp.PROTOCOL_MAJOR}.{fp.PROTOCOL_MINOR}"
+    assert f"protocol {fp.PROTOCOL_MAJOR + 1}.{fp.PROTOCOL_MINOR}" in rig.supervisor.last_error
+    assert f"speaks {host}" in rig.supervisor.last_error
 
 
 @pytest.mark.parametrize("rig", [{"to_host": LinkFaults(loss_rate=0.05, seed=9)}], indirect=True)
