@@ -104,17 +104,22 @@ uint8_t board_lowest_fault(void)
 
 /* --- faults ----------------------------------------------------------------------------- */
 
-static void send_fault(uint8_t code, uint8_t detail)
+static void send_fault_report(uint32_t counter, uint8_t code, uint8_t detail)
 {
     uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
-    B.last_fault_report_us = B.now_us;
-    dthc_put_u32(p, B.fault_counter[code]);
+    dthc_put_u32(p, counter);
     dthc_put_u32(p + 4, B.now_us);
     p[8] = code;
     p[9] = detail;
     dthc_put_u16(p + 10, B.faults);
     dthc_put_i32(p + 12, board_z_um());
     board_send_small(DTHC_MSG_FAULT, 0, 16);
+}
+
+static void send_fault(uint8_t code, uint8_t detail)
+{
+    B.last_fault_report_us = B.now_us;
+    send_fault_report(B.fault_counter[code], code, detail);
 }
 
 /* Latch a fault (tick context): torch and ohmic sensing off, motion ended and Z
@@ -169,14 +174,40 @@ static void read_inputs(void)
     }
 }
 
+/* At rest (PROTOCOL.md section 4): nothing lit, nothing moving. Torch and ohmic sensing
+ * off, and Z neither running a move, a probe or a velocity nor decelerating from one
+ * (board_z_busy: the status byte's Z_BUSY). */
+static bool board_at_rest(void)
+{
+    return !B.torch && !B.ohmic && !board_z_busy();
+}
+
+/* The lease ran out (tick context). In use: latched, outputs off, Z stopped, re-armed only
+ * by FAULT_RESET. At rest: one FAULT LEASE_EXPIRED detail IDLE with the next event counter
+ * and the fault set as it is, nothing latched; the next valid frame renews the lease
+ * (renew_lease sets it running again, so a later lapse is reported again). Nothing can leave
+ * the rest state while the host stays silent: only host frames switch the torch or ohmic
+ * sensing on or start Z, and every valid frame renews the lease before it is executed. */
+static void check_lease(void)
+{
+    if (!B.session || B.lease != LEASE_RUNNING
+        || (int32_t)(B.now_us - B.last_rx_us) <= (int32_t)B.lease_ms * 1000) {
+        return;
+    }
+    if (board_at_rest()) {
+        B.lease = LEASE_LAPSED_IDLE;
+        B.event_counter++;
+        send_fault_report(B.event_counter, DTHC_FAULT_LEASE_EXPIRED, DTHC_LEASE_DETAIL_IDLE);
+        return;
+    }
+    B.lease = LEASE_EXPIRED;
+    board_latch(DTHC_FAULT_LEASE_EXPIRED, DTHC_LEASE_DETAIL_LATCHED);
+}
+
 static void check_safety(void)
 {
     uint16_t in = B.inputs;
-    if (B.session && !B.lease_expired
-        && (int32_t)(B.now_us - B.last_rx_us) > (int32_t)B.lease_ms * 1000) {
-        B.lease_expired = true;
-        board_latch(DTHC_FAULT_LEASE_EXPIRED, 0);
-    }
+    check_lease();
     if (in & (1u << DTHC_INPUT_BREAKAWAY)) {
         board_latch(DTHC_FAULT_BREAKAWAY, 0);
     }

@@ -180,6 +180,9 @@ static void cmd_hello(uint8_t seq, const uint8_t *p)
     B.outcome_next = 0;
     B.zvel_applied = false; /* the velocity stream restarts with each session */
     B.last_rx_us = hal_time_us();
+    if (B.lease == LEASE_LAPSED_IDLE) {
+        B.lease = LEASE_RUNNING; /* a lapse of an earlier session ends with it */
+    }
 }
 
 static void cmd_query(uint8_t seq, uint8_t what)
@@ -283,7 +286,7 @@ static void cmd_fault_reset(uint8_t seq, uint16_t mask)
         }
     }
     if (mask & (1u << DTHC_FAULT_LEASE_EXPIRED)) {
-        B.lease_expired = false; /* re-armed explicitly, from now */
+        B.lease = LEASE_RUNNING; /* re-armed explicitly, from now */
         B.last_rx_us = hal_time_us();
     }
     reply(seq, 0, 0);
@@ -353,8 +356,9 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
  * now: the main loop may decode it up to a millisecond later. */
 static void renew_lease(void)
 {
-    if (B.session && !B.lease_expired) {
+    if (B.session && B.lease != LEASE_EXPIRED) {
         B.last_rx_us = hal_uart_delimiter_us();
+        B.lease = LEASE_RUNNING; /* an idle lapse ends here: no re-arm (section 4) */
     }
 }
 

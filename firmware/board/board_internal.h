@@ -27,6 +27,11 @@
 
 typedef enum { Z_IDLE, Z_MOVE, Z_PROBE, Z_VELOCITY, Z_STOPPING } z_mode_t;
 
+/* The host lease (PROTOCOL.md section 4): running; ran out at rest (reported, nothing
+ * latched: the next valid frame renews it); ran out in use (LEASE_EXPIRED latched: only
+ * FAULT_RESET re-arms it). */
+typedef enum { LEASE_RUNNING, LEASE_LAPSED_IDLE, LEASE_EXPIRED } lease_state_t;
+
 typedef struct {
     uint8_t seq;
     uint8_t code; /* 0: ACK, else the NAK code */
@@ -59,7 +64,7 @@ typedef struct {
 
     /* session and lease */
     bool session;
-    bool lease_expired;
+    uint8_t lease; /* lease_state_t (one byte: the Nano's RAM is short) */
     uint16_t lease_ms;
     uint32_t last_rx_us;
 

@@ -316,6 +316,138 @@ static int test_frames_after_expiry_do_not_revive(void)
     return 0;
 }
 
+/* The FAULT frames of a code since `since`, counted; *first set to the first one. */
+static unsigned faults_of(uint8_t code, unsigned since, const frame_t **first)
+{
+    unsigned i, n = 0;
+    *first = NULL;
+    for (i = since; i < n_out; i++) {
+        if (out[i].type == DTHC_MSG_FAULT && out[i].p[8] == code) {
+            if (!n) {
+                *first = &out[i];
+            }
+            n++;
+        }
+    }
+    return n;
+}
+
+/* The lease runs out with the board at rest (nothing lit, Z still): one FAULT
+ * LEASE_EXPIRED detail IDLE in the first tick past the lease, with the next event counter
+ * and no fault bit; not repeated while the host stays silent; nothing latched, so the
+ * host's next frame renews the lease and a TORCH on is accepted without FAULT_RESET. */
+static int test_idle_lease_lapse_reported_once_not_latched(void)
+{
+    unsigned mark;
+    const frame_t *f;
+    uint32_t t_last, counter;
+    uint8_t seq;
+    hello();
+    counter = dthc_get_u32(status()->p + 15); /* the event counter before the lapse */
+    t_last = (uint32_t)F.now_us;
+    mark = n_out;
+    run_ms(250);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 0, "lapse reported before the lease");
+    run_ms(1);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "no idle lapse reported");
+    CHECK(f->p[9] == DTHC_LEASE_DETAIL_IDLE, "detail %u, want IDLE", f->p[9]);
+    CHECK(dthc_get_u16(f->p + 10) == 0, "fault set 0x%04x in the lapse report",
+          dthc_get_u16(f->p + 10));
+    CHECK(dthc_get_u32(f->p) == counter + 1, "counter %u, want %u",
+          (unsigned)dthc_get_u32(f->p), (unsigned)(counter + 1));
+    CHECK(dthc_get_u32(f->p + 4) - t_last <= 251000u, "reported at %u us",
+          (unsigned)(dthc_get_u32(f->p + 4) - t_last));
+    run_ms(800); /* silent on: no re-report every 250 ms */
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "the idle lapse was repeated");
+    CHECK(!F.torch && !F.ohmic && F.rate == 0, "outputs on or Z moving after the lapse");
+    CHECK(faults() == 0, "a fault latched by an idle lapse");
+    CHECK(!(status_bits() & DTHC_STATUS_FAULT_LATCHED), "FAULT_LATCHED after an idle lapse");
+    mark = n_out;
+    seq = cmd_u8(DTHC_MSG_TORCH, 1);
+    CHECK(is_ack(seq, mark) && F.torch, "TORCH on after an idle lapse refused");
+    run_ms(200);
+    CHECK(F.torch, "the renewed lease ran out early");
+    return 0;
+}
+
+/* Once per lapse: the host comes back, falls silent again, and the new lapse is reported
+ * again with a new counter. A HELLO of a new session also ends a lapse. */
+static int test_idle_lease_lapse_reported_again_after_renewal(void)
+{
+    unsigned mark;
+    const frame_t *f1, *f2;
+    hello();
+    mark = n_out;
+    run_ms(300);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f1) == 1, "first lapse not reported");
+    CHECK(is_ack(send(DTHC_MSG_HEARTBEAT, NULL, 0), mark), "heartbeat after the lapse");
+    mark = n_out;
+    run_ms(249);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f2) == 0, "lease not renewed by a frame");
+    run_ms(2);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f2) == 1, "second lapse not reported");
+    CHECK(f2->p[9] == DTHC_LEASE_DETAIL_IDLE && dthc_get_u32(f2->p) > dthc_get_u32(f1->p),
+          "second lapse: detail %u counter %u", f2->p[9], (unsigned)dthc_get_u32(f2->p));
+    hello();
+    mark = n_out;
+    run_ms(251);
+    CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f2) == 1, "lapse after HELLO not reported");
+    CHECK(faults() == 0, "a fault latched by an idle lapse");
+    return 0;
+}
+
+/* Not at rest: Z moving (a move, a probe, a velocity in force, or still decelerating from
+ * a stop) with the torch and ohmic sensing off still latches LEASE_EXPIRED (detail
+ * LATCHED), ends the motion and stops Z; likewise ohmic sensing on with Z still. */
+static int test_lease_latches_when_not_at_rest(void)
+{
+    int c;
+    for (c = 0; c < 5; c++) {
+        unsigned mark;
+        const frame_t *f;
+        uint16_t lease = 100;
+        setup();
+        hello();
+        cmd_u16(DTHC_MSG_SET_LEASE, 100);
+        if (c == 0) {
+            z_move(80000, 5000);
+        } else if (c == 1) {
+            z_probe(5000, 30000, IN(FLOAT));
+        } else if (c == 2) {
+            z_velocity(1, 5000, 200);
+        } else if (c == 3) {
+            cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+        } else {
+            z_move(80000, 60000);
+            run_ms(60);
+            lease = 30;
+            cmd_u16(DTHC_MSG_SET_LEASE, lease);
+            send(DTHC_MSG_Z_STOP, NULL, 0); /* from 39 mm/s at 650 mm/s^2: 60 ms */
+        }
+        mark = n_out;
+        run_ms(lease + 1u);
+        CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "case %d: no FAULT", c);
+        CHECK(f->p[9] == DTHC_LEASE_DETAIL_LATCHED, "case %d: detail %u", c, f->p[9]);
+        CHECK(dthc_get_u16(f->p + 10) & FAULT(LEASE_EXPIRED), "case %d: not latched", c);
+        CHECK(!F.ohmic, "case %d: ohmic sensing on after expiry", c);
+        if (c == 0) {
+            CHECK(last(DTHC_MSG_MOTION_DONE, -1, mark)
+                      && last(DTHC_MSG_MOTION_DONE, -1, mark)->p[0] == DTHC_MOTION_FAULT,
+                  "the move must end with MOTION_DONE FAULT");
+        }
+        if (c == 1) {
+            CHECK(last(DTHC_MSG_PROBE_RESULT, -1, mark)
+                      && last(DTHC_MSG_PROBE_RESULT, -1, mark)->p[0] == DTHC_PROBE_ABORTED,
+                  "the probe must end with PROBE_RESULT ABORTED");
+        }
+        run_ms(300);
+        CHECK(F.rate == 0, "case %d: Z still stepping after expiry", c);
+        CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) >= 2, "case %d: not re-reported", c);
+        CHECK(faults() & FAULT(LEASE_EXPIRED), "case %d: a frame revived the lease", c);
+    }
+    return 0;
+}
+
 /* While latched, FAULT is re-sent every 250 ms with the counter that latched it. */
 static int test_fault_rereported_every_250ms(void)
 {
@@ -988,6 +1120,9 @@ static const struct {
     T(lease_expiry_within_one_tick),
     T(lease_runs_from_the_frames_arrival),
     T(frames_after_expiry_do_not_revive),
+    T(idle_lease_lapse_reported_once_not_latched),
+    T(idle_lease_lapse_reported_again_after_renewal),
+    T(lease_latches_when_not_at_rest),
     T(fault_rereported_every_250ms),
     T(duplicate_replayed_not_reexecuted),
     T(nak_with_rejected_frames_seq),

@@ -1,8 +1,8 @@
 """DESIGN.md's safety promises of a board, measured on the firmware's own ELF on the emulated
 Mega 2560 at its pins (the harness's record, simulated time): E-stop and breakaway latch the
 torch relay off within one sample period and keep it off until released and reset; lease
-expiry drops the relay and stops Z; a velocity stream into the soft limit stops there and
-latches Z_LIMIT.
+expiry drops the relay and stops Z (and at rest is reported, not latched); a velocity
+stream into the soft limit stops there and latches Z_LIMIT.
 """
 
 from __future__ import annotations
@@ -159,3 +159,25 @@ def test_a_velocity_stream_into_the_soft_limit_stops_there_and_latches_z_limit(
     link.expect(lambda s: fp.ZMove(s, 60_000, 50_000), fp.Ack)
     link.run_for(1.0)
     assert board.status().z_um == 60_000
+
+
+def test_an_idle_lease_lapse_is_reported_once_and_the_next_frame_goes_on(
+    board: EmulatedBoard, link: FrameLink
+) -> None:
+    """Relay and ohmic sensing off, Z still, then the host falls silent (100 ms lease):
+    one FAULT LEASE_EXPIRED detail IDLE with no fault bit, not repeated in 0.6 s of
+    silence; nothing latched, so the host's next frame, a TORCH on, is accepted without
+    FAULT_RESET and the relay rises (PROTOCOL.md §4)."""
+    link.expect(lambda s: fp.SetLease(s, 100), fp.Ack)
+    mark = len(link.received)
+    link.run_for(0.6)  # silence: the lease runs out with nothing lit and Z at rest
+    lapses = [f for f in link.reports(fp.Fault, mark) if f.code == FaultCode.LEASE_EXPIRED]
+    assert [(f.detail, f.faults) for f in lapses] == [(fp.LEASE_DETAIL_IDLE, 0)]
+    assert not board.status().torch
+    link.expect(lambda s: fp.Torch(s, True), fp.Ack)
+    link.run_for(0.01)
+    assert board.status().torch
+    status = link.status()
+    assert status.faults == 0
+    assert status.status & fp.StatusBit.TORCH_ON
+    link.expect(lambda s: fp.Torch(s, False), fp.Ack)
