@@ -130,7 +130,8 @@ class BoardFirmware:
         self.t_us = 0
         self.session = False
         self.lease_ms = fp.DEFAULT_LEASE_MS
-        self.lease_expired = False
+        self.lease_expired = False  # ran out in use: LEASE_EXPIRED latched until FAULT_RESET
+        self.lease_lapsed_idle = False  # ran out at rest: reported once, until the next frame
         self.lease_violation_counted = False
         self.unsafe_torch_us = 0  # torch on past lease + one period: the soak's figure
         self.last_rx_us = 0
@@ -180,6 +181,7 @@ class BoardFirmware:
     def _renew_lease(self) -> None:
         if self.session and not self.lease_expired:
             self.last_rx_us = self.t_us
+            self.lease_lapsed_idle = False  # an idle lapse ends here: no re-arm (§4)
 
     def _on_bad_frame(self, error: fp.DecodeError) -> None:
         # A frame with a valid CRC but unknown type or wrong length still renews the lease
@@ -250,6 +252,7 @@ class BoardFirmware:
         self.replies.clear()
         self.zvel_applied = False
         self.last_rx_us = self.t_us
+        self.lease_lapsed_idle = False
 
     def _hello_info(self, seq: int) -> fp.HelloInfo:
         ident = self.identity
@@ -481,10 +484,39 @@ class BoardFirmware:
     def _lease_overdue(self) -> bool:
         return self.session and self.t_us - self.last_rx_us > self.lease_ms * 1000
 
+    def at_rest(self) -> bool:
+        """Nothing lit, nothing moving (PROTOCOL.md §4): torch and ohmic sensing off, no
+        move, probe or velocity in force, and Z still (not decelerating)."""
+        return (
+            not self.torch_on
+            and not self.ohmic_sense
+            and self.move_seq is None
+            and self.probe is None
+            and self.zvel_expiry_us is None
+            and self.plant.zaxis.is_idle
+        )
+
     def _check_lease(self) -> None:
-        if not self.lease_expired and self._lease_overdue():
-            self.lease_expired = True
-            self._latch(FaultCode.LEASE_EXPIRED)
+        """In use: LEASE_EXPIRED latched, outputs off, Z stopped, until FAULT_RESET. At rest:
+        one FAULT LEASE_EXPIRED detail IDLE with the next event counter and the fault set as
+        it is, nothing latched; the next valid frame renews the lease. Nothing can leave the
+        rest state while the host stays silent: only host frames start the torch, ohmic
+        sensing or Z, and each valid frame renews the lease before it is executed."""
+        if self.lease_expired or self.lease_lapsed_idle or not self._lease_overdue():
+            return
+        if self.at_rest():
+            self.lease_lapsed_idle = True
+            self.event_counter += 1
+            self._send(
+                fp.Fault(
+                    0, self.event_counter & 0xFFFFFFFF, self.t_us & 0xFFFFFFFF,
+                    FaultCode.LEASE_EXPIRED, fp.LEASE_DETAIL_IDLE, self.faults,
+                    _um(self.plant.zaxis.position_mm),
+                )
+            )  # fmt: skip
+            return
+        self.lease_expired = True
+        self._latch(FaultCode.LEASE_EXPIRED, fp.LEASE_DETAIL_LATCHED)
 
     def _audit_lease(self) -> None:
         """Ground truth, independent of the firmware's own lease logic (which a faulty variant

@@ -14,7 +14,14 @@ import firmware_protocol as fp
 
 from .firmware import BoardFirmware
 
-__all__ = ["VARIANTS", "DuplicatesActedTwice", "LeaseIgnored", "WrongCrcVariant"]
+__all__ = [
+    "VARIANTS",
+    "DuplicatesActedTwice",
+    "IdleLapseLatched",
+    "IdleLapseUnreported",
+    "LeaseIgnored",
+    "WrongCrcVariant",
+]
 
 
 class LeaseIgnored(BoardFirmware):
@@ -22,6 +29,28 @@ class LeaseIgnored(BoardFirmware):
 
     def _check_lease(self) -> None:
         return
+
+
+class IdleLapseLatched(BoardFirmware):
+    """Latches LEASE_EXPIRED whenever the lease runs out, at rest too (protocol 1.0's rule,
+    while announcing 1.1): an idle table must be re-armed."""
+
+    def at_rest(self) -> bool:
+        return False
+
+
+class IdleLapseUnreported(BoardFirmware):
+    """Latches nothing when the lease runs out at rest, and says nothing either."""
+
+    def _send(self, msg: fp.Message) -> bytes:
+        idle_lapse = (
+            isinstance(msg, fp.Fault)
+            and msg.code == fp.FaultCode.LEASE_EXPIRED
+            and msg.detail == fp.LEASE_DETAIL_IDLE
+        )
+        if idle_lapse:
+            return b""
+        return super()._send(msg)
 
 
 class DuplicatesActedTwice(BoardFirmware):
@@ -54,6 +83,8 @@ class WrongCrcVariant(BoardFirmware):
 VARIANTS: dict[str, type[BoardFirmware]] = {
     "good": BoardFirmware,
     "lease-ignored": LeaseIgnored,
+    "idle-lapse-latched": IdleLapseLatched,
+    "idle-lapse-unreported": IdleLapseUnreported,
     "duplicates-twice": DuplicatesActedTwice,
     "wrong-crc": WrongCrcVariant,
 }

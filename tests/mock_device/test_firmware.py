@@ -78,8 +78,10 @@ def test_lease_expiry_turns_the_torch_off_within_one_sample_period(host: SimHost
 
 
 def test_lease_fault_is_repeated_and_blocks_the_torch_until_reset(host: SimHost) -> None:
-    """Frames after expiry do not revive the lease: TORCH on is refused until FAULT_RESET."""
+    """The lease runs out in use (ohmic sensing on): frames after expiry do not revive it,
+    TORCH on is refused until FAULT_RESET."""
     host.open_session(lease_ms=50)
+    host.request(fp.OhmicSense(0, True))
     host.pump(120)
     host.pump(600)
     reports = host.of_type(fp.Fault)
@@ -91,6 +93,105 @@ def test_lease_fault_is_repeated_and_blocks_the_torch_until_reset(host: SimHost)
     assert nak.detail == FaultCode.LEASE_EXPIRED
     assert isinstance(host.request(fp.FaultReset(0, 0xFFFF)), fp.Ack)
     assert isinstance(host.request(fp.Torch(0, True)), fp.Ack)
+
+
+def _lease_reports(host: SimHost, since: int) -> list[fp.Fault]:
+    return [
+        m
+        for m in host.received[since:]
+        if isinstance(m, fp.Fault) and m.code == FaultCode.LEASE_EXPIRED
+    ]
+
+
+def test_idle_lease_lapse_is_reported_once_and_latches_nothing(host: SimHost) -> None:
+    """At rest (torch and ohmic sensing off, Z still) the lease running out is one FAULT
+    LEASE_EXPIRED detail IDLE in the first tick past it, with the next event counter and no
+    fault bit, not repeated while the host stays silent; the next frame renews the lease
+    and TORCH on is accepted without FAULT_RESET."""
+    host.open_session(lease_ms=100)
+    status = host.request(fp.Query(0, fp.QueryWhat.STATUS))
+    assert isinstance(status, fp.Status)
+    last_rx_us = host.board.firmware.t_us
+    mark = len(host.received)
+    host.pump(100)
+    assert not _lease_reports(host, mark)
+    host.pump(1)
+    (lapse,) = _lease_reports(host, mark)
+    assert lapse.detail == fp.LEASE_DETAIL_IDLE
+    assert lapse.faults == 0
+    assert lapse.counter == status.event_counter + 1
+    assert 100_000 < lapse.t_us - last_rx_us <= 101_000
+    host.pump(800)  # silent on: no re-report every 250 ms
+    assert len(_lease_reports(host, mark)) == 1
+    after = host.request(fp.Query(0, fp.QueryWhat.STATUS))
+    assert isinstance(after, fp.Status)
+    assert after.faults == 0
+    assert not after.status & fp.StatusBit.FAULT_LATCHED
+    assert isinstance(host.request(fp.Torch(0, True)), fp.Ack)
+    host.pump(90)
+    assert host.board.plant.torch_on  # the renewed lease runs from that frame
+
+
+def test_idle_lease_lapse_is_reported_again_after_a_renewal(host: SimHost) -> None:
+    """Once per lapse: the host comes back, falls silent again, and the new lapse is
+    reported again with a newer counter; a new session's HELLO also ends a lapse."""
+    host.open_session(lease_ms=100)
+    mark = len(host.received)
+    host.pump(150)
+    (first,) = _lease_reports(host, mark)
+    assert isinstance(host.request(fp.Heartbeat(0)), fp.Ack)
+    mark = len(host.received)
+    host.pump(100)
+    assert not _lease_reports(host, mark)  # renewed by the heartbeat
+    host.pump(1)
+    (second,) = _lease_reports(host, mark)
+    assert second.detail == fp.LEASE_DETAIL_IDLE
+    assert second.counter > first.counter
+    host.open_session(lease_ms=100)
+    mark = len(host.received)
+    host.pump(101)
+    assert len(_lease_reports(host, mark)) == 1
+    assert host.board.firmware.faults == 0
+
+
+@pytest.mark.parametrize("case", ["move", "probe", "velocity", "ohmic", "decelerating"])
+def test_lease_latches_when_the_board_is_not_at_rest(host: SimHost, case: str) -> None:
+    """Torch off but Z moving (a move, a probe, a velocity in force, or still decelerating
+    from a stop) or ohmic sensing on: the lease latches LEASE_EXPIRED (detail LATCHED),
+    ends the motion, stops Z and re-reports until FAULT_RESET."""
+    host.open_session(lease_ms=100)
+    lease_ms = 100
+    if case == "move":
+        host.request(fp.ZMove(0, 80_000, 5_000))
+    elif case == "probe":
+        host.request(fp.ZProbe(0, 5_000, 30_000, InputMask.FLOAT))
+    elif case == "velocity":
+        host.send(fp.ZVelocity(0, 1, 5_000, 200))
+    elif case == "ohmic":
+        host.request(fp.OhmicSense(0, True))
+    else:
+        host.request(fp.ZMove(0, 80_000, 60_000))
+        host.pump(60)
+        lease_ms = 30
+        host.request(fp.SetLease(0, lease_ms))
+        host.request(fp.ZStop(0))
+        assert not host.board.plant.zaxis.is_idle  # still braking
+    mark = len(host.received)
+    host.pump(lease_ms + 1)
+    (fault,) = _lease_reports(host, mark)
+    assert fault.detail == fp.LEASE_DETAIL_LATCHED
+    assert fault.faults & (1 << FaultCode.LEASE_EXPIRED)
+    assert not host.board.firmware.ohmic_sense
+    if case == "move":
+        (done,) = [m for m in host.received[mark:] if isinstance(m, fp.MotionDone)]
+        assert done.result == fp.MotionResult.FAULT
+    if case == "probe":
+        (probe,) = [m for m in host.received[mark:] if isinstance(m, fp.ProbeResult)]
+        assert probe.result == fp.ProbeOutcome.ABORTED
+    host.pump(300)
+    assert host.board.plant.zaxis.is_idle
+    assert len(_lease_reports(host, mark)) >= 2
+    assert host.board.firmware.faults & (1 << FaultCode.LEASE_EXPIRED)
 
 
 def test_duplicate_command_is_acknowledged_again_and_not_acted_on_twice(host: SimHost) -> None:
