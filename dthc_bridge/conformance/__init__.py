@@ -3,8 +3,9 @@
 Runs a suite of checks against whatever board is on the other end of LINK (``/dev/...``,
 ``socket://HOST:PORT``, ``usb://VID:PID``), with no plasma cutter needed: handshake and
 version, replies and duplicates, corrupt frames, telemetry rate/jitter/gaps and round
-trip, Z velocity expiry, probe stop on contact, input events, the host lease, boot id
-across a reset. Every Z move stays inside a window the operator confirms (``--yes``).
+trip, Z velocity expiry, probe stop on contact, input events, the host lease (latched in
+use, a lapse reported at rest), boot id across a reset. Every Z move stays inside a
+window the operator confirms (``--yes``).
 
 Each check reports ``passed`` True, False, or None when skipped (it could not run on this
 bench, e.g. no way to reset the board); the exit status is 1 if any check failed, 0

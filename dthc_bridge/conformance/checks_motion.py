@@ -1,9 +1,7 @@
-"""Checks of the safety rules that need outputs and motion (PROTOCOL.md §3-§5, §8).
+"""Checks of the safety rules that need motion and inputs (PROTOCOL.md §3, §5-§8).
 
-z_velocity_expiry, probe_contact, input_events and lease_expiry. Z moves only inside the
-confirmed window; the torch relay is switched on only with ``--allow-torch-relay``. The
-output whose drop the lease check watches is ohmic sensing (which lease expiry must switch
-off just like the torch), plus the torch relay when allowed.
+z_velocity_expiry, probe_contact and input_events. Z moves only inside the confirmed
+window. The host lease has its own checks (checks_lease.py).
 """
 
 from __future__ import annotations
@@ -14,15 +12,12 @@ from collections import Counter
 from collections.abc import Callable, Iterable
 
 import firmware_protocol as fp
-from firmware_protocol import Capability, FaultCode, InputBit, InputMask, StatusBit
+from firmware_protocol import Capability, InputBit, InputMask, StatusBit
 
-from ..link import RequestTimeout, extend_u32
+from ..link import extend_u32
 from .context import InputRecord, SuiteContext, batch_end_us, mm
 from .errors import ConformanceError
 from .options import (
-    LEASE_TOLERANCE_US,
-    LEASE_WAIT_EXTRA_S,
-    SUITE_LEASE_MS,
     ZVEL_EXPIRY_MS,
     ZVEL_GIVE_UP_S,
     ZVEL_RENEW_PERIOD_S,
@@ -35,14 +30,12 @@ from .report import CheckResult, Value, failed, passed, skipped
 __all__ = [
     "audit_input_events",
     "check_input_events",
-    "check_lease_expiry",
     "check_probe_contact",
     "check_z_velocity_expiry",
 ]
 
 PROBE_EXTRA_S = 3.0  # beyond travel / feed, for the deceleration and the report
 STALE_FRAME_WAIT_S = 0.08
-SAMPLES_AFTER_FAULT_S = 0.2  # wait this long for a batch showing the outputs off
 # An input an operator can toggle on a bench, by the capability that says the board has it.
 _INPUTS: tuple[tuple[InputBit, Capability | None, str], ...] = (
     (InputBit.ARC_OK, None, "close the arc OK input (a jumper), then open it"),
@@ -388,137 +381,3 @@ async def _toggle_inputs(ctx: SuiteContext) -> tuple[InputRecord, list[str]]:
                 operator.tell(f"Release {bit.name}: a fault stays latched while it is active.")
     after = await ctx.status()
     return InputRecord(before, after, mark, link.mark(), "toggled by the operator"), missing
-
-
-# --- the host lease ----------------------------------------------------------------------
-
-
-async def check_lease_expiry(ctx: SuiteContext) -> list[CheckResult]:
-    """Host silent: within lease + one sample period the board latches LEASE_EXPIRED and
-    drops its outputs; later frames do not revive them; FAULT_RESET re-arms."""
-    link = ctx.link
-    opts = ctx.options
-    await ctx.clear_faults()
-    outputs = 0
-    if ctx.capable(Capability.OHMIC):
-        outputs |= StatusBit.OHMIC_SENSE
-    if opts.allow_torch_relay:
-        outputs |= StatusBit.TORCH_ON
-    names = "+".join(n for n, b in (("ohmic sense", 2), ("torch", 1)) if outputs & b) or "none"
-    await ctx.expect_ack(fp.SetLease(0, opts.lease_ms))
-    values: dict[str, Value] = {"lease_ms": opts.lease_ms, "outputs": names}
-    try:
-        if outputs & StatusBit.OHMIC_SENSE:
-            await ctx.expect_ack(fp.OhmicSense(0, True))
-        if outputs & StatusBit.TORCH_ON:
-            await ctx.expect_ack(fp.Torch(0, True))
-        on = await ctx.status()
-        if on.status & outputs != outputs:
-            raise ConformanceError(f"could not switch on {names} (status 0x{on.status:02x})")
-        async with link.silent():
-            measured = await _fall_silent(ctx, outputs)
-        after = await ctx.status()  # a frame after expiry: it must not revive anything
-    finally:
-        await _rearm(ctx)
-    t_last, fault, period_us, last_on_us, first_off_us = measured
-    limit_us = opts.lease_ms * 1000 + period_us
-    values.update(limit_ms=limit_us / 1e3, sample_period_us=period_us)
-    problems = []
-    if fault is None:
-        problems.append(
-            f"no LEASE_EXPIRED fault within {opts.lease_ms + LEASE_WAIT_EXTRA_S * 1e3:.0f} ms "
-            "of the last host frame"
-        )
-    else:
-        fault_us = extend_u32(fault.t_us, t_last) - t_last
-        values["fault_after_ms"] = fault_us / 1e3
-        if fault_us > limit_us + LEASE_TOLERANCE_US:
-            problems.append(
-                f"LEASE_EXPIRED {fault_us / 1e3:.1f} ms after the last host frame, limit "
-                f"{opts.lease_ms} + {period_us / 1e3:g} ms"
-            )
-    if last_on_us is not None:
-        values["last_on_ms"] = last_on_us / 1e3
-        if last_on_us > limit_us + LEASE_TOLERANCE_US:
-            problems.append(f"{names} still on {last_on_us / 1e3:.1f} ms after the last frame")
-    if outputs and fault is not None and first_off_us is None:
-        problems.append(f"no SAMPLES showed {names} off after the fault")
-    if fault is not None and not after.faults & (1 << FaultCode.LEASE_EXPIRED):
-        problems.append("LEASE_EXPIRED no longer latched after later host frames")
-    if fault is not None and after.status & (StatusBit.TORCH_ON | StatusBit.OHMIC_SENSE):
-        problems.append(f"outputs on again after later host frames (status 0x{after.status:02x})")
-    if problems:
-        hint = "the board must time the lease in its sample interrupt (PROTOCOL.md §4, §10.4)"
-        return [failed("lease_expiry", "; ".join(problems), hint=hint, values=values)]
-    if outputs and last_on_us is not None and first_off_us is not None:
-        values["first_off_ms"] = first_off_us / 1e3
-        watched = (
-            f"{names} last reported on at {last_on_us / 1e3:.1f} ms, off at "
-            f"{first_off_us / 1e3:.1f} ms"
-        )
-    else:
-        watched = "no output watched (no ohmic sensing; --allow-torch-relay adds the torch)"
-    figure = (
-        f"LEASE_EXPIRED {values['fault_after_ms']:.1f} ms after the last host frame (limit "
-        f"{opts.lease_ms} + {period_us / 1e3:g} ms); {watched}; latched until FAULT_RESET"
-    )
-    return [passed("lease_expiry", figure, values=values)]
-
-
-async def _fall_silent(
-    ctx: SuiteContext, outputs: int
-) -> tuple[int, fp.Fault | None, int, int | None, int | None]:
-    """Send a last CLOCK_QUERY and nothing more. Its reply stamps, in board time, when the
-    board last heard the host: the lease runs from there. Returns that time, the FAULT,
-    the sample period, and (relative to that time) the last batch that showed an output
-    on and the first that showed them off after the fault."""
-    link = ctx.link
-    opts = ctx.options
-    clock: fp.Clock | None = None
-    mark = link.mark()
-    for _ in range(3):
-        mark = link.mark()
-        try:
-            reply = await link.request(fp.ClockQuery(0), attempts=1)
-        except RequestTimeout:
-            continue  # a lost reply: ask again (a query renews the lease, that is fine)
-        if isinstance(reply, fp.Clock):
-            clock = reply
-            break
-    if clock is None:
-        raise ConformanceError("CLOCK_QUERY unanswered before the silent period")
-    t_last = clock.t_us
-    wait_s = opts.lease_ms / 1000 + LEASE_WAIT_EXTRA_S
-    found = await link.wait_for_type(
-        fp.Fault, wait_s, since=mark, where=lambda f: f.code == FaultCode.LEASE_EXPIRED
-    )
-    fault = found[1] if found is not None else None
-    first_off_us = None
-    if fault is not None:
-        fault_us = extend_u32(fault.t_us, t_last)
-        off = await link.wait_for(
-            lambda m: (
-                isinstance(m, fp.Samples)
-                and not m.status & outputs
-                and batch_end_us(m, t_last) >= fault_us
-            ),
-            SAMPLES_AFTER_FAULT_S,
-            since=mark,
-        )
-        if off is not None:
-            assert isinstance(off.msg, fp.Samples)
-            first_off_us = batch_end_us(off.msg, t_last) - t_last
-    batches = link.messages(fp.Samples, since=mark)
-    period_us = batches[-1].period_us if batches else 1_000_000 // ctx.require_info().sample_rate_hz
-    on_times = [batch_end_us(b, t_last) - t_last for b in batches if b.status & outputs]
-    last_on_us = max(on_times) if on_times and outputs else None
-    return t_last, fault, period_us, last_on_us, first_off_us
-
-
-async def _rearm(ctx: SuiteContext) -> None:
-    """Outputs off, the lease fault reset, the suite's lease back."""
-    await ctx.expect_ack(fp.Torch(0, False))
-    if ctx.capable(Capability.OHMIC):
-        await ctx.expect_ack(fp.OhmicSense(0, False))
-    await ctx.clear_faults()
-    await ctx.expect_ack(fp.SetLease(0, SUITE_LEASE_MS))

@@ -22,6 +22,7 @@ import firmware_protocol as fp
 
 from ..link import LinkError, RequestTimeout
 from ..transport import TransportError, TransportOpener
+from .checks_lease import check_lease_expiry, check_lease_idle_lapse
 from .checks_link import (
     capability_names,
     check_boot_id_reset,
@@ -33,7 +34,6 @@ from .checks_link import (
 )
 from .checks_motion import (
     check_input_events,
-    check_lease_expiry,
     check_probe_contact,
     check_z_velocity_expiry,
 )
@@ -81,6 +81,7 @@ _STEPS: tuple[_Step, ...] = (
     _Step(("probe_contact",), check_probe_contact, _probe_timeout_s),
     _Step(("input_events",), check_input_events, _inputs_timeout_s),
     _Step(("lease_expiry",), check_lease_expiry),
+    _Step(("lease_idle_lapse",), check_lease_idle_lapse),
     _Step(("boot_id_reset",), check_boot_id_reset, lambda o: CHECK_TIMEOUT_S + 60.0),
 )
 

@@ -100,6 +100,10 @@ def test_good_firmware_passes_every_check(good_run: SuiteRun) -> None:
     # The lease fault comes within lease + one sample period, measured on the board clock.
     lease = checks["lease_expiry"]["values"]
     assert lease["fault_after_ms"] <= lease["lease_ms"] + lease["sample_period_us"] / 1000
+    assert lease["detail"] == 0  # ohmic sensing on: latched
+    lapse = checks["lease_idle_lapse"]["values"]
+    assert lapse["lapse_after_ms"] <= lapse["lease_ms"] + lapse["sample_period_us"] / 1000
+    assert (lapse["detail"], lapse["faults"], lapse["reports"]) == (1, "0x0000", 1)
     assert checks["probe_contact"]["values"]["contact_z_mm"] == pytest.approx(20.0, abs=0.05)
     assert good_run.seconds < 15.0
 
@@ -120,16 +124,36 @@ def test_json_report_has_one_entry_per_check_with_name_passed_figure(good_run: S
 
 
 def test_lease_ignored_firmware_fails_the_lease_check(tmp_path: Path) -> None:
-    """A firmware that never notices the host went silent fails lease_expiry (and only
-    that), in the readable report, with exit status 1."""
+    """A firmware that never notices the host went silent fails lease_expiry and
+    lease_idle_lapse (and only those), in the readable report, with exit status 1."""
     run = run_against_variant(tmp_path, "lease-ignored")
     assert run.returncode == EXIT_FAILED, run.stdout + run.stderr
     fail_lines = [line for line in run.stdout.splitlines() if line.lstrip().startswith("FAIL")]
-    assert len(fail_lines) == 1, run.stdout
+    assert len(fail_lines) == 2, run.stdout
     assert "lease_expiry" in fail_lines[0]
     assert "no LEASE_EXPIRED fault" in fail_lines[0]
     assert "ohmic sense still on" in fail_lines[0]
-    assert "result: FAIL (13 passed, 1 failed, 0 skipped)" in run.stdout
+    assert "lease_idle_lapse" in fail_lines[1]
+    assert "no FAULT LEASE_EXPIRED within" in fail_lines[1]
+    assert f"result: FAIL ({len(CHECK_NAMES) - 2} passed, 2 failed, 0 skipped)" in run.stdout
+
+
+@pytest.mark.parametrize(
+    ("variant", "why"),
+    [
+        ("idle-lapse-latched", "the lease latched LEASE_EXPIRED at rest (detail 0"),
+        ("idle-lapse-unreported", "no FAULT LEASE_EXPIRED within"),
+    ],
+)
+def test_idle_lapse_variants_fail_the_idle_lapse_check(
+    tmp_path: Path, variant: str, why: str
+) -> None:
+    """A firmware that still latches the lease at rest (an idle table to re-arm), and one
+    that latches nothing and says nothing, each fail lease_idle_lapse (and only that)."""
+    run = run_against_variant(tmp_path, variant, "--json")
+    assert run.returncode == EXIT_FAILED, run.stdout + run.stderr
+    assert run.failed() == {"lease_idle_lapse"}
+    assert why in run.checks()["lease_idle_lapse"]["figure"]
 
 
 def test_duplicates_twice_firmware_fails_the_duplicate_check(tmp_path: Path) -> None:

@@ -1,9 +1,9 @@
 """The suite in-process, against a simulated board ticking in real time behind an injected opener.
 
 Covers what the mock process cannot show: a board without ohmic sensing (the duplicate
-check falls back to Z moves, the probe to the float switch, the lease check to the fault
-alone), a link that cannot be opened, and the pure parts (window, input-event audit,
-options) on their own.
+check falls back to Z moves, the probe to the float switch; with no output to switch on
+the lease is checked at rest only), a link that cannot be opened, and the pure parts
+(window, input-event audit, options) on their own.
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ NO_OHMIC = BoardIdentity(
 @pytest.mark.slow
 async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_switch() -> None:
     """Without the OHMIC capability the suite still checks duplicates (a Z move resent must
-    not move Z again), probes by the float switch and times the lease fault; all pass,
-    the reset is skipped (no way to reset), and nothing moved outside the window."""
+    not move Z again), probes by the float switch and checks the idle lease lapse; all
+    pass, the latched lease (no output to switch on without --allow-torch-relay) and the
+    reset (no way to reset) are skipped, and nothing moved outside the window."""
     sim = RealtimeSimBoard(SimulatedBoard("flat_clean", 11, identity=NO_OHMIC))
     options = ConformanceOptions(link="sim://conf-no-ohmic", start_z_mm=25.0, feed_mm_s=50.0,
                                  rtt_limit_ms=100.0, telemetry_s=1.0, rtt_queries=50)  # fmt: skip
@@ -39,13 +40,16 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
     checks = {c.name: c for c in report.checks}
     assert list(checks) == list(CHECK_NAMES)
     verdicts = {name: c.passed for name, c in checks.items()}
-    assert verdicts == {**dict.fromkeys(CHECK_NAMES, True), "boot_id_reset": None}, [
+    skips = {"lease_expiry": None, "boot_id_reset": None}
+    assert verdicts == {**dict.fromkeys(CHECK_NAMES, True), **skips}, [
         (c.name, c.figure) for c in report.checks if c.passed is not True
     ]
     assert report.exit_status == 0
     assert checks["duplicate_seq"].values["action"] == "Z_MOVE up 0.5 mm"
     assert checks["probe_contact"].values["sensor"] == "FLOAT"
     assert "--reset-signal-pid" in checks["boot_id_reset"].hint
+    assert "--allow-torch-relay" in checks["lease_expiry"].hint
+    assert checks["lease_idle_lapse"].values["detail"] == fp.LEASE_DETAIL_IDLE
     assert sim.board.firmware.torch_on is False
 
 
