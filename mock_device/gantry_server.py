@@ -10,6 +10,17 @@ JSON lines over TCP, one request per line, one reply per request:
                             as if from the board's UART (the fuzz bench's frames)
     {"op": "drop_frames", "rate": 0.01, "for_s": 10}  -> {"ok": true}: lose that share of the
                             board's frames for a while (the fault bench)
+    {"op": "input", "name": "estop", "on": true}  -> {"ok": true}: hold a board input active
+                            (true) or inactive (false) whatever the plant's physics says;
+                            "on": null hands it back to the physics. Names: arc_ok, ohmic,
+                            float, breakaway, thc_up, thc_down, estop, z_limit_min,
+                            z_limit_max. The board sees it at its pin, as a real switch: it
+                            shows in SAMPLES, EVENT and STATUS input bits, a forced E-stop or
+                            breakaway latches its fault (and FAULT_RESET is refused while it
+                            is held), a forced float or ohmic contact stops a probe, a forced
+                            arc OK counts for ARC_LOST. Ohmic contact shows only while ohmic
+                            sensing is on, as on a real board. (This mock latches Z_LIMIT at
+                            its soft limits; a forced limit switch is reported, no more.)
 
 A bad line or op gets {"ok": false, "error": "..."} and changes nothing.
 """
@@ -23,11 +34,14 @@ from collections.abc import Callable
 from typing import Any
 
 from .plant.gantry import GcodeError
+from .plant.inputs import InputBit
 from .plant.plant import Plant
 
-__all__ = ["GantryServer"]
+__all__ = ["INPUT_NAMES", "GantryServer"]
 
 MAX_LINE = 4096
+#: The inputs the ``input`` op can hold, by their names on the wire (PROTOCOL.md §7).
+INPUT_NAMES: dict[str, int] = {str(bit.name).lower(): int(bit) for bit in InputBit}
 
 
 class GantryServer:
@@ -66,6 +80,25 @@ class GantryServer:
                 await asyncio.gather(*self._clients, return_exceptions=True)
             await self._server.wait_closed()
             self._server = None
+
+    def _force_input(self, request: dict[str, Any]) -> dict[str, Any]:
+        name = request.get("name")
+        if not isinstance(name, str) or name not in INPUT_NAMES:
+            return {
+                "ok": False,
+                "error": f"input: unknown name {json.dumps(name)} "
+                f"(one of {', '.join(INPUT_NAMES)})",
+            }
+        if "on" not in request:
+            return {"ok": False, "error": "input: 'on' is missing (true, false or null)"}
+        on = request["on"]
+        if on is not None and not isinstance(on, bool):
+            return {
+                "ok": False,
+                "error": f"input: 'on' must be true, false or null, not {json.dumps(on)}",
+            }
+        self.plant.force_input(INPUT_NAMES[name], on)
+        return {"ok": True}
 
     def _status(self) -> dict[str, Any]:
         g = self.plant.gantry
@@ -113,6 +146,8 @@ class GantryServer:
             except (KeyError, TypeError, ValueError) as exc:
                 return {"ok": False, "error": f"drop_frames: {exc}"}
             return {"ok": True}
+        if op == "input":
+            return self._force_input(request)
         if op == "line":
             try:
                 queued = gantry.feed_line(str(request.get("gcode", "")))

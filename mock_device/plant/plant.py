@@ -92,6 +92,10 @@ class Plant:
         self._torch_on = False
         self._ohmic_sense = False
         self._estop = False
+        # Inputs held by hand (force_input): set bits on, cleared bits off, whatever the
+        # physics says; the rest follow it.
+        self._forced_on = 0
+        self._forced_off = 0
         self._measured_v = 0.0
         self._first_transfer_t_s: float | None = None
         self._arc_lost_due_t_s = math.inf
@@ -127,12 +131,30 @@ class Plant:
         self.arc.set_current_a(current_a)
 
     def reset_breakaway(self) -> bool:
-        """Try to clear the breakaway latch; return True if it is still tripped."""
-        return self.head.reset_breakaway()
+        """Try to clear the breakaway latch; return True if it is still tripped (or held
+        active by ``force_input``)."""
+        return self.head.reset_breakaway() or bool(self._forced_on & _BREAKAWAY)
 
     def set_estop(self, on: bool) -> None:
         """E-stop input (for tests); the plant only reports it."""
         self._estop = on
+
+    def force_input(self, bit: int, on: bool | None) -> None:
+        """Hold the input ``bit`` (an ``InputBit``) active (True) or inactive (False)
+        whatever the physics says, as a switch wired to the pin would; None hands it back
+        to the physics. OHMIC held active is seen only while ohmic sensing is on, as a
+        contact is (its circuit is off otherwise)."""
+        self._forced_on &= ~bit
+        self._forced_off &= ~bit
+        if on is True:
+            self._forced_on |= bit
+        elif on is False:
+            self._forced_off |= bit
+
+    @property
+    def forced_inputs(self) -> tuple[int, int]:
+        """The inputs held active and those held inactive by ``force_input``."""
+        return self._forced_on, self._forced_off
 
     def load_default_program(self) -> int:
         """Queue the scenario's default program on the gantry; return the segments queued."""
@@ -240,6 +262,9 @@ class Plant:
             bits |= _Z_LIMIT_MIN
         elif limit == "max":
             bits |= _Z_LIMIT_MAX
+        if self._forced_on | self._forced_off:
+            forced_on = self._forced_on if self._ohmic_sense else self._forced_on & ~_OHMIC
+            bits = (bits & ~self._forced_off) | forced_on
         return bits
 
     input_bits = inputs
