@@ -10,9 +10,12 @@ from __future__ import annotations
 import asyncio
 import json
 from collections.abc import Callable
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
-__all__ = ["BackendError", "MotionBackend", "MotionListener", "SimGantryBackend"]
+__all__ = [
+    "BackendError", "MotionBackend", "MotionListener", "Positioned", "SimGantryBackend", "Where",
+]  # fmt: skip
 
 MotionListener = Callable[[float, str], None]
 """Called with the measured XY speed (mm/s) and the controller's state, per status report."""
@@ -53,6 +56,32 @@ class MotionBackend(Protocol):
         ...
 
     async def close(self) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Where:
+    """Where the motion controller says the torch is: XY in mm (work coordinates), its
+    measured speed, and whether it holds (a feed hold: the operator's, or one of its own)."""
+
+    x_mm: float
+    y_mm: float
+    speed_mm_s: float
+    held: bool
+
+
+@runtime_checkable
+class Positioned(Protocol):
+    """A backend that reports the torch's position (the console's line, the panel's
+    marker) and can release a hold an earlier sender left behind."""
+
+    async def where(self) -> Where | None:
+        """The latest position (None before the controller reported one)."""
+        ...
+
+    async def release_stale_hold(self) -> None:
+        """Before a program starts: a hold (and its queue) left by a sender that died is
+        dropped, so the new program does not sit waiting for a cycle start."""
+        ...
 
 
 class SimGantryBackend:
@@ -116,6 +145,15 @@ class SimGantryBackend:
 
     async def hold(self) -> None:
         await self._call(op="hold")
+
+    async def where(self) -> Where | None:
+        reply = await self._call(op="status")
+        return Where(float(reply["x"]), float(reply["y"]), float(reply["speed_mm_s"]),
+                     bool(reply.get("held", False)))  # fmt: skip
+
+    async def release_stale_hold(self) -> None:
+        await self.clear()
+        await self.resume()
 
     async def clear(self) -> None:
         await self._call(op="clear")

@@ -117,7 +117,9 @@ async def _send(args: argparse.Namespace) -> int:
     elif report.ok:
         pressed = (f", cycle start at line {', '.join(map(str, report.cycle_starts))}"
                    if report.cycle_starts else "")  # fmt: skip
-        print(f"done: {report.lines_sent} lines, {report.cuts_started} cuts{pressed}")
+        first = args.start_line if args.start_line > 1 else 1
+        span = f"lines {first}-{len(lines)}" if first > 1 else f"all {len(lines)} lines"
+        print(f"done: {span} of {args.program.name}, {report.cuts_started} cuts{pressed}")
     else:
         where = f"; resume from line {report.resume_from}" if report.resume_from else ""
         print(f"stopped at line {report.error_line}: {report.error}{where}")

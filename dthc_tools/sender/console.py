@@ -3,8 +3,10 @@
 Keys (single keys, no Enter, when the terminal is interactive):
 
     c  cycle start: release a G200 S1 stop after pierce, or resume after a pause
-    p  pause: feed hold and THC hold (c resumes)
+    p  pause: motion held; a cut is ended (torch off, safe height: a paused program never
+       keeps the arc lit), and c resumes it where the torch stands (touch-off, pierce)
     s  stop: torch off, safe height, motion held; the program ends
+    a  re-arm after a fault (when no program is paused: then g or r re-arm)
     +  torch up 1 V       -  torch down 1 V
     >  feed +10 %         <  feed -10 %         =  feed 100 %   (grbl's feed override)
     u  cut height +0.1 mm d  cut height -0.1 mm (PlasmaC's height override)
@@ -46,7 +48,8 @@ __all__ = ["KEYS", "OperatorConsole"]
 log = structlog.get_logger("dthc_tools.sender.console")
 
 KEYS = (
-    "c cycle start · p pause · s stop · +/- torch 1 V · u/d height 0.1 mm · >/</= feed · "
+    "c cycle start · p pause · s stop · a re-arm · +/- torch 1 V · u/d height 0.1 mm · "
+    ">/</= feed · "
     "after an error: [/] path -/+5 mm · 4/6/8/2 offset 1 mm · 0 on path · g resume here · "
     "r re-arm+restart · q quit"
 )
@@ -82,24 +85,28 @@ class OperatorConsole:
             asyncio.Queue()
         )
         self.paused: PausedProgram | None = None
+        self.operator_stop = False  # the paused program stopped for a pause, not an error
         self._pressed: asyncio.Queue[str] = asyncio.Queue()  # from the terminal
         sender.daemon.on_telemetry(self.telemetry.update)
 
     def status_line(self) -> str:
+        """Where the torch is in the program (the line it is on, the cut being cut), the
+        arc voltage beside the THC's target, and the height above the plate."""
         p = self.sender.progress
         done = p.line / p.total_lines if p.total_lines else 0.0
         filled = round(done * BAR)
         t = self.telemetry
-        volts = t.get("voltage_v")
-        z = t.get("z_mm")
         state = "waiting for cycle start" if p.waiting_cycle_start else str(t.get("state", "-"))
-        if p.operator_paused:
+        if self.paused is not None:
+            state = "paused (c resumes here)" if self.operator_stop else "stopped (g resumes here)"
+        elif p.operator_paused:
             state = "paused (c resumes)"
-        arc = f"{volts:6.1f} V" if isinstance(volts, int | float) else "     - V"
-        height = f"{z:5.2f} mm" if isinstance(z, int | float) else "    - mm"
+        arc = f"arc {_figure(t.get('voltage_v'), 6, 1)} V"
+        target = f"target {_figure(t.get('target_v'), 5, 1)} V"
+        height = f"height {_figure(t.get('height_mm'), 5, 2)} mm"
         return (
             f"line {p.line}/{p.total_lines} | cut {p.cut}/{p.total_cuts} | {state} | "
-            f"{arc} {height} | [{'#' * filled}{'-' * (BAR - filled)}] {done:4.0%}"
+            f"{arc}, {target} | {height} | [{'#' * filled}{'-' * (BAR - filled)}] {done:4.0%}"
         )
 
     async def press(self, key: str) -> None:
@@ -107,7 +114,9 @@ class OperatorConsole:
         sender = self.sender
         try:
             if key == "c":
-                await sender.cycle_start()
+                await self.cycle_start()
+            elif key == "a":
+                await self.rearm()
             elif key == "p":
                 await sender.pause()
             elif key == "s":
@@ -133,6 +142,22 @@ class OperatorConsole:
         except (DaemonError, BackendError) as exc:
             self._say(f"{key}: {exc}")
 
+    async def cycle_start(self) -> None:
+        """After the operator's pause of a cut: resume where the torch stands (the start
+        sequence there). Else the sender's: an S1 stop, a pause with nothing lit."""
+        if self.paused is not None and self.operator_stop:
+            await self.act("resume")
+        else:
+            await self.sender.cycle_start()
+
+    async def rearm(self) -> None:
+        """The daemon leaves its fault state (a stale error is cleared with it). A paused
+        program re-arms with its resume or restart instead."""
+        if self.sender.progress.running or self.paused is not None:
+            raise BackendError("re-arm: a program is running or paused (g or r re-arm it)")
+        await self.sender.daemon.request("rearm")
+        self._say("re-armed")
+
     async def act(self, name: str, **args: Any) -> Any:
         """An action on a paused program (keys, a panel): done by the job loop once the
         program has stopped; its answer, or BackendError with the reason. During an
@@ -142,7 +167,9 @@ class OperatorConsole:
         progress = self.sender.progress
         if progress.running:
             if name in ("path_move", "recovery_offset") and progress.operator_paused:
-                await self.sender.stop()  # torch off where it stands; paused motion follows
+                if not self.sender.cut_paused:  # paused between cuts: the program ends here
+                    await self.sender.stop()
+                # else the pause has ended the cut, and the program is stopping by itself
             elif name != "quit":
                 raise BackendError(f"{name}: the program is running (pause it, or stop it)")
         elif self.paused is None and name != "quit":
@@ -152,11 +179,13 @@ class OperatorConsole:
         return await answer
 
     def _say(self, text: str) -> None:
+        """Once: on the terminal when there is one, else in the log."""
         self.messages.append(text)
-        log.warning("console", message=text)
         if self.interactive:
             self.out.write(f"\r\x1b[K{text}\n")
             self.out.flush()
+        else:
+            log.warning("console", message=text)
 
     async def run_job(
         self,
@@ -169,17 +198,24 @@ class OperatorConsole:
         """Run the program; after an error the operator may move along the path, resume
         where the torch stands, re-arm and restart, or quit (when someone is there)."""
         resume: ResumeAt | None = None
+        whole: SendReport | None = None  # every run of the job: the summary counts them all
         with self._keyboard(), self._progress():
             while True:
                 report = await self.sender.run(
                     lines, start_line=start_line, dialect=dialect, codes=codes, resume=resume
                 )
+                whole = report if whole is None else _merged(whole, report)
                 if report.ok or not self.waits:
-                    return report
-                self._say(f"stopped at line {report.error_line}: {report.error}")
+                    return whole
+                self.operator_stop = report.operator_paused
+                if report.operator_paused:
+                    self._say(f"paused at line {report.error_line}: torch off and raised; "
+                              "c resumes here (touch-off, pierce where it stands)")  # fmt: skip
+                else:
+                    self._say(f"stopped at line {report.error_line}: {report.error}")
                 choice = await self._paused(report)
                 if choice is None:
-                    return report
+                    return whole
                 start_line, resume = choice
 
     async def _paused(self, report: SendReport) -> tuple[int, ResumeAt | None] | None:
@@ -187,6 +223,8 @@ class OperatorConsole:
         point) to run from, or None to end."""
         sender = self.sender
         paused = None
+        if report.operator_paused:
+            await sender.daemon_idle()  # the torch rises to safe height before it moves
         if sender.path is not None and sender.path.segments:
             paused = PausedProgram(sender, sender.path, up_to_step=sender.last_step)
             try:
@@ -237,6 +275,7 @@ class OperatorConsole:
         if name == "resume":
             at = paused.resume_at()
             await self.sender.rearm()
+            await self.sender.daemon_idle()  # still raising after a pause: M3 waits for it
             return 1, at
         if name == "path_move":
             return await paused.move_along(_number(args, "mm"), _number(args, "feed_mm_min", None))
@@ -302,6 +341,30 @@ class OperatorConsole:
 
 
 _REQUIRED = object()
+
+
+def _figure(value: object, width: int, decimals: int) -> str:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return f"{value:{width}.{decimals}f}"
+    return "-".rjust(width)
+
+
+def _merged(whole: SendReport, run: SendReport) -> SendReport:
+    """The job so far and its latest run (after a resume or a restart): its outcome is the
+    latest run's, its counts the whole job's."""
+    again = bool(run.cut_lines and whole.cut_lines and run.cut_lines[0] == whole.cut_lines[-1])
+    if again:  # the run began by cutting again the cut the last one stopped in: one cut
+        run.cuts_started -= 1
+        del run.cut_lines[0]
+    run.lines_run |= whole.lines_run
+    run.lines_sent += whole.lines_sent
+    run.plasma_commands += whole.plasma_commands
+    run.cuts_started += whole.cuts_started
+    run.cycle_starts[:0] = whole.cycle_starts
+    run.paused[:0] = whole.paused
+    run.resume_points = sorted(set(whole.resume_points) | set(run.resume_points))
+    run.cut_lines[:0] = whole.cut_lines
+    return run
 
 
 def _number(args: dict[str, Any], key: str, default: Any = _REQUIRED) -> Any:

@@ -23,6 +23,7 @@ Ethernet), through the daemon's own transports. On connect: a soft reset and the
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -32,7 +33,7 @@ import structlog
 
 from dthc_bridge.transport import Transport, TransportError, open_transport
 
-from .backend import BackendError, MotionListener
+from .backend import BackendError, MotionListener, Where
 from .grbl_protocol import (
     CYCLE_START,
     FEED_HOLD,
@@ -100,6 +101,7 @@ class GrblBackend:
         self.info = FirmwareInfo()
         self.status: StatusReport | None = None
         self.position: tuple[float, float] = (float("nan"), float("nan"))
+        self._speed_mm_s = 0.0
         self.figures = GrblFigures()
         self._transport: Transport | None = None
         self._buffer = b""
@@ -238,6 +240,7 @@ class GrblBackend:
         self.position = (position[0], position[1])
         measured = self._meter.add(self._status_at, position[0], position[1])
         speed = anti_dive_speed(report, measured)
+        self._speed_mm_s = speed if speed is not None else 0.0
         if speed is not None:
             for listener in self._listeners:
                 listener(speed, report.state)
@@ -365,6 +368,21 @@ class GrblBackend:
 
     async def resume(self) -> None:
         self._write(CYCLE_START)
+
+    async def where(self) -> Where | None:
+        """From the latest status report (polled at ``poll_hz``): no request of its own."""
+        x, y = self.position
+        if self.status is None or math.isnan(x) or math.isnan(y):  # none reported yet
+            return None
+        held = self.status.state in ("Hold", "Door")
+        return Where(x, y, self._speed_mm_s, held)
+
+    async def release_stale_hold(self) -> None:
+        """A hold left by a sender that died keeps grbl's queue: dropped (soft reset), never
+        resumed (that would run the dead program's lines)."""
+        if self.status is not None and self.status.state in ("Hold", "Door"):
+            log.warning("grbl_stale_hold_released", state=self.status.state)
+            await self.clear()
 
     async def clear(self) -> None:
         """Drop what is queued: hold first if moving (no ALARM:3), soft reset, re-sync."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from dthc_bridge.controller.commands import (
     Command,
@@ -142,6 +143,39 @@ class ProgramPath:
         if best is None or best[0] > ON_PATH_MM:
             raise BackendError(f"the torch (X{x:.3f} Y{y:.3f}) is not on the program's path")
         return best[1]
+
+    def follow(
+        self, x: float, y: float, start: int, *, up_to_step: int, within_mm: float = ON_PATH_MM
+    ) -> Segment | None:
+        """The segment the torch is on, searched forward from ``start`` (the one it was on)
+        among those sent so far: the first within ``within_mm``. None when off the path (a
+        restart's move, a recovery offset): the caller keeps what it had."""
+        for segment in self.segments[start:]:
+            if segment.step_index > up_to_step:
+                break
+            if segment.project(x, y)[1] <= within_mm:
+                return segment
+        return None
+
+    def document(self, program: str, *, arc_step_mm: float = 2.0) -> dict[str, Any]:
+        """The path as the panel draws it (the retained ``sender/path``): one move per
+        segment, in mm, arcs as points ``arc_step_mm`` apart; ``cut`` None for a rapid or a
+        move with the torch off."""
+        moves: list[dict[str, Any]] = []
+        xs: list[float] = []
+        ys: list[float] = []
+        for segment in self.segments:
+            if segment.kind in (2, 3):
+                count = max(2, math.ceil(segment.length / arc_step_mm) + 1)
+                points = [segment.point_at(segment.length * i / (count - 1)) for i in range(count)]
+            else:
+                points = [(segment.x0, segment.y0), (segment.x1, segment.y1)]
+            rounded = [[round(px, 3), round(py, 3)] for px, py in points]
+            xs += [p[0] for p in rounded]
+            ys += [p[1] for p in rounded]
+            moves.append({"cut": segment.cut, "line": segment.source_line, "points": rounded})
+        bounds = [min(xs), min(ys), max(xs), max(ys)] if xs else [0.0, 0.0, 0.0, 0.0]
+        return {"program": program, "bounds": bounds, "moves": moves}
 
     def cut_start(self, point: PathPoint) -> PathPoint:
         """How far back paused motion may go: the start of the cut the point is in (the

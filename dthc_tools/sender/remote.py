@@ -13,7 +13,9 @@ Names: ``cycle_start``, ``pause``, ``stop``, ``feed_override`` {step: "+10"|"-10
 after an error (the program paused where the torch stopped, see :mod:`.recovery`):
 ``path_move`` {mm, feed_mm_min?}, ``recovery_offset`` {x_mm, y_mm, feed_mm_min?},
 ``resume`` (here), ``restart`` (from the cut's start), ``quit``; and forwarded to the
-daemon as they are: ``torch_up``, ``torch_down``, ``height_override``, ``thc``, ``rearm``.
+daemon as they are: ``torch_up``, ``torch_down``, ``height_override``, ``thc``, ``rearm``,
+and, while no program runs or it is paused, ``ohmic_test``, ``probe_test``, ``jog_z``.
+``sender/path`` (retained) is the program's XY path for a panel's preview, once per start.
 Every request gets exactly one response, an unknown name or argument an error naming it.
 """
 
@@ -45,6 +47,9 @@ longer than this, and a panel redraws at about this rate."""
 FEED_STEPS = ("+10", "-10", "reset")
 FORWARDED = ("torch_up", "torch_down", "height_override", "thc", "rearm")
 """The daemon's requests a panel sends through the sender (dthc_bridge/mqtt/roles.py)."""
+IDLE_TOOLS = ("ohmic_test", "probe_test", "jog_z")
+"""Forwarded too, but only while no program runs (or it is paused): they move Z or
+energise the torch's ohmic circuit, which a running program owns."""
 
 
 class OperatorRemote:
@@ -64,7 +69,7 @@ class OperatorRemote:
         self.program = PurePosixPath(program).name
         self._tasks: set[asyncio.Task[None]] = set()
         self._actions: dict[str, Callable[[dict[str, Any]], Awaitable[None]]] = {
-            "cycle_start": lambda _args: sender.cycle_start(),
+            "cycle_start": self._cycle_start,
             "pause": lambda _args: sender.pause(),
             "stop": lambda _args: sender.stop(),
             "feed_override": self._feed_override,
@@ -76,6 +81,8 @@ class OperatorRemote:
         # here (the daemon checks the arguments and the state).
         for name in FORWARDED:
             self._actions[name] = functools.partial(self._forward, name)
+        for name in IDLE_TOOLS:
+            self._actions[name] = functools.partial(self._idle_tool, name)
         client.on_topic("sender/request/+", self._on_request)
 
     def _on_request(self, topic: str, document: dict[str, Any]) -> None:
@@ -103,6 +110,20 @@ class OperatorRemote:
 
     async def _forward(self, name: str, args: dict[str, Any]) -> None:
         await self.client.request(name, **args)
+
+    async def _idle_tool(self, name: str, args: dict[str, Any]) -> None:
+        progress = self.sender.progress
+        if progress.running and not progress.operator_paused:
+            raise BackendError(f"{name}: the program is running (pause or stop it first)")
+        await self.client.request(name, **args)
+
+    async def _cycle_start(self, _args: dict[str, Any]) -> None:
+        """Cycle start: the console's (a paused program resumes where the torch stands),
+        else the sender's (an S1 stop, a pause with nothing lit)."""
+        if self.console is not None:
+            await self.console.cycle_start()
+        else:
+            await self.sender.cycle_start()
 
     async def _paused_action(self, name: str, args: dict[str, Any]) -> None:
         if self.console is None:
@@ -132,8 +153,15 @@ class OperatorRemote:
         """Until cancelled: the progress whenever it changed, at most every PROGRESS_PERIOD_S;
         the last one (program ended) on the way out."""
         last = ""
+        drawn: object = None  # the path last published (one per program start)
         try:
             while True:
+                path = self.sender.path
+                if path is not None and path is not drawn:
+                    await self.client.publish(
+                        "sender/path", path.document(self.program), retain=True
+                    )
+                    drawn = path
                 document = self.progress()
                 text = json.dumps(document, sort_keys=True)
                 if text != last:

@@ -39,15 +39,20 @@ from dthc_bridge.program.plan import (
     detect_dialect,
 )
 
-from .backend import BackendError, MotionBackend
+from .backend import BackendError, MotionBackend, Positioned
 from .daemon_client import DaemonClient, DaemonError
 from .path import ProgramPath, build_path, starts_cut
 from .recovery import ResumeAt
 
-__all__ = ["SendReport", "Sender"]
+__all__ = ["POSITION_PERIOD_S", "SendReport", "Sender"]
 
 log = structlog.get_logger("dthc_tools.sender")
 _T = TypeVar("_T")
+
+POSITION_PERIOD_S = 0.2
+"""The torch's position is asked for this often while a program runs (the console's line,
+the panel's marker): as often as the progress goes out."""
+PAUSED_BY_OPERATOR = "paused by the operator"
 
 
 @dataclass
@@ -63,6 +68,10 @@ class SendReport:
     cycle_starts: list[int] = field(default_factory=list)  # the M3 lines released by it
     dialect: str = ""
     warnings: list[str] = field(default_factory=list)
+    lines_run: set[int] = field(default_factory=set)  # program lines carried out (1-based)
+    # The program stopped for the operator's pause (the cut ended, torch out, raised): not
+    # an error; the resume runs the start sequence where the torch stands.
+    operator_paused: bool = False
 
     @property
     def ok(self) -> bool:
@@ -94,6 +103,7 @@ class SendReport:
             "restart_line": self.restart_line, "paused": self.paused,
             "cut_lines": self.cut_lines, "cycle_starts": self.cycle_starts,
             "dialect": self.dialect, "warnings": self.warnings,
+            "lines_run": len(self.lines_run), "operator_paused": self.operator_paused,
         }  # fmt: skip
 
 
@@ -110,6 +120,12 @@ class Progress:
     running: bool = False
     # After an error, while the operator may move the torch: where it is on the path.
     paused_at: dict[str, Any] | None = None
+    # Where the torch is, as the motion controller reports it (None before it has): XY in
+    # mm, its speed, and the path segment it is on (an index into the sender/path moves).
+    x_mm: float | None = None
+    y_mm: float | None = None
+    feed_mm_min: float | None = None
+    segment: int | None = None
 
 
 class Sender:
@@ -123,6 +139,8 @@ class Sender:
         self.report = SendReport()
         self._pause: asyncio.Event = asyncio.Event()
         self._pause_reason = ""
+        self._paused_cut = False  # the pause came from the daemon ending a cut for a pause
+        self._at_line: int | None = None  # the daemon line in flight: the torch is there
         self._go = asyncio.Event()  # cleared while the operator has paused the program
         self._go.set()
         self.velocity_percent = 100.0  # PlasmaC M67/M68 E3: the machine runs slower
@@ -152,12 +170,15 @@ class Sender:
         if event.get("cause") == "stop_after_pierce":
             # G200 S1: the pending M3 is answered once the operator presses cycle start.
             self.progress.waiting_cycle_start = True
-            log.warning("waiting_for_cycle_start", line=self.progress.line)
+            log.warning("waiting_for_cycle_start", line=self._at_line)
             if self.auto_cycle_start:
                 self._background(self.cycle_start())
             return
         if event.get("type") in ("pause", "arc_lost"):
             self._pause_reason = str(event.get("reason", event.get("type")))
+            # The daemon ended a lit cut for a pause (invariant 7): the program stops where
+            # the torch is, to be resumed there; nothing to abort.
+            self._paused_cut = event.get("cause") == "operator_pause"
             self._pause.set()
             # Held now, within one status period, not when the loop next looks: it may be
             # waiting for room in the controller's buffer while grbl runs what it has.
@@ -177,8 +198,9 @@ class Sender:
             raise BackendError(f"nothing to start ({reason}): re-arm and restart instead")
         if self.progress.waiting_cycle_start:
             self.progress.waiting_cycle_start = False
-            self.report.cycle_starts.append(self.progress.line)
-            log.info("cycle_start", line=self.progress.line)
+            line = self._at_line if self._at_line is not None else self.progress.line
+            self.report.cycle_starts.append(line)
+            log.info("cycle_start", line=line)
             await self.daemon.request("cycle_start")
         elif self.progress.operator_paused:
             await self.backend.resume()
@@ -190,13 +212,22 @@ class Sender:
             raise BackendError("nothing waits for cycle start (no S1 stop, no pause)")
 
     async def pause(self) -> None:
-        """Feed hold and THC hold; the program goes on after cycle start."""
+        """Feed hold and THC hold. A cut running is ended by the daemon (torch out, safe
+        height: docs/DESIGN.md invariant 7) and the program stops where the torch is, to be
+        resumed there through the start sequence; with nothing lit the motion only holds,
+        and cycle start releases it."""
         if self.progress.operator_paused or not self.progress.running:
             return
         self.progress.operator_paused = True
         self._go.clear()
-        await asyncio.gather(self.backend.hold(), self.daemon.request("thc_hold", on=True))
-        log.info("paused_by_operator", line=self.progress.line)
+        _, held = await asyncio.gather(
+            self.backend.hold(), self.daemon.request("thc_hold", on=True)
+        )
+        if held.get("cut_ended"):
+            self._paused_cut = True
+            self._pause_reason = PAUSED_BY_OPERATOR
+            self._pause.set()  # as the daemon's pause event does, should it come late
+        log.info("paused_by_operator", line=self.progress.line, cut_ended=self._paused_cut)
 
     async def stop(self) -> None:
         """Torch off and safe height (the daemon's abort: re-arm before the next cut), motion
@@ -229,6 +260,25 @@ class Sender:
         await self.backend.clear()
         await self.backend.resume()
 
+    @property
+    def cut_paused(self) -> bool:
+        """The operator's pause has ended a cut: the program stops by itself, to be resumed
+        where the torch stands (nothing to stop or abort)."""
+        return self._paused_cut
+
+    async def daemon_idle(self, timeout_s: float = 15.0) -> None:
+        """Until the daemon's sequence rests (the raise after a pause ends): a resume's M3
+        would be refused while it runs. BackendError after ``timeout_s``."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout_s
+        while True:
+            state = (await self.daemon.request("status")).get("state")
+            if state in ("idle", "faulted") or state is None:
+                return
+            if loop.time() >= deadline:
+                raise BackendError(f"the daemon is still busy ({state}) after {timeout_s:g} s")
+            await asyncio.sleep(0.05)
+
     async def run(
         self,
         lines: Sequence[str],
@@ -248,19 +298,56 @@ class Sender:
         report = self.report = SendReport()
         self._pause.clear()
         self._pause_reason = ""
+        self._paused_cut = False
         self.velocity_percent = 100.0
         self.progress = Progress(total_lines=len(lines), running=True)
         self._go.set()
+        tracker: asyncio.Task[None] | None = None
         try:
+            if isinstance(self.backend, Positioned):
+                # A sender killed mid-program leaves its hold (and queue) behind.
+                await self.backend.release_stale_hold()
+                tracker = asyncio.ensure_future(self._track(self.backend))
             return await self._run(lines, start_line, dialect, codes, report, resume=resume)
         except asyncio.CancelledError:
             # Ctrl-C, or the caller gave up: nothing may go on without the sender.
             await asyncio.shield(self._stop_machine())
             raise
         finally:
+            if tracker is not None:
+                tracker.cancel()
             self.progress.running = False
             self.progress.operator_paused = False
             self.progress.waiting_cycle_start = False
+
+    async def _track(self, backend: Positioned) -> None:
+        """Until cancelled: where the torch is, and the program line it is on (the path's
+        segment there, searched forward from the last one among the lines sent so far)."""
+        progress = self.progress
+        while True:
+            try:
+                where = await backend.where()
+            except BackendError as exc:
+                log.debug("position_unavailable", error=str(exc))
+                where = None
+            if where is not None:
+                progress.x_mm, progress.y_mm = round(where.x_mm, 3), round(where.y_mm, 3)
+                progress.feed_mm_min = round(where.speed_mm_s * 60.0, 1)
+                path = self.path
+                if self._at_line is not None:  # at rest for it (a pierce, an S1 stop)
+                    progress.line = self._at_line
+                elif path is not None:
+                    segment = path.follow(where.x_mm, where.y_mm, progress.segment or 0,
+                                          up_to_step=self.last_step)  # fmt: skip
+                    if segment is not None:
+                        progress.segment = segment.index
+                        progress.line = segment.source_line
+                if where.held and progress.running and not progress.operator_paused \
+                        and not self._pause.is_set():  # fmt: skip
+                    # A hold from the controller itself (its feed-hold button): a pause.
+                    log.warning("feed_hold_on_the_controller", line=progress.line)
+                    self._background(self.pause())
+            await asyncio.sleep(POSITION_PERIOD_S)
 
     async def _run(
         self,
@@ -295,9 +382,13 @@ class Sender:
         number = start_line
         restart = RestartPosition()
         resumed = _Resumption(self.path, resume) if resume is not None else None
+        tracked = isinstance(self.backend, Positioned)
         for index, step in enumerate(plan.steps()):
             number = step.source_line
-            self.progress.line = number
+            if not tracked or isinstance(step, DaemonStep):
+                # The torch is there: daemon lines wait for the motion before them. Motion
+                # lines go ahead of the torch, which the tracker follows.
+                self.progress.line = number
             if resumed is not None and index < resumed.step_index:
                 restart.skip(step)
                 if not resumed.replays(index, step):
@@ -308,6 +399,7 @@ class Sender:
                 self.progress.cut += _cuts_in(step, plan)
                 continue
             self.last_step = index
+            report.lines_run.add(number)
             try:
                 if resumed is not None:  # the step whose segment the resume point splits
                     await self._resume_here(resumed, restart, plan, report, number)
@@ -321,10 +413,18 @@ class Sender:
             except (CommandError, DaemonError) as exc:
                 report.error, report.error_line = str(exc), number
             if self._pause.is_set() and not report.error:
-                report.error, report.error_line = f"paused: {self._pause_reason}", number
+                # Where the torch stopped (the tracker's line), not the line sent last.
+                here = self.progress.line if tracked else number
+                report.error, report.error_line = f"paused: {self._pause_reason}", here
             if report.error:
                 report.paused.append(self._pause_reason or report.error)
-                await self._stop_machine()
+                if self._paused_cut:
+                    # The daemon has ended the cut for the pause: hold, nothing to abort
+                    # (an abort would make the pause a fault to re-arm).
+                    report.operator_paused = True
+                    await self._hold()
+                else:
+                    await self._stop_machine()
                 log.warning("program_stopped", line=number, error=report.error)
                 report.warnings = plan.warnings
                 return report
@@ -444,11 +544,17 @@ class Sender:
         await self._unless_paused(self._go.wait())  # an operator pause: not during it
         if self._pause.is_set():
             return
-        if any(starts_cut(command) for command in parsed.commands):
+        cuts = sum(1 for command in parsed.commands if starts_cut(command))
+        if cuts:
             report.cut_lines.append(step.source_line)  # where a restart re-cuts from
-        data = await self.daemon.gcode(
-            step.line, line_number=step.source_line, xy=xy, dialect=str(plan.dialect)
-        )
+            self.progress.cut += cuts  # the cut being cut: from its M3, pierce included
+        self._at_line = step.source_line
+        try:
+            data = await self.daemon.gcode(
+                step.line, line_number=step.source_line, xy=xy, dialect=str(plan.dialect)
+            )
+        finally:
+            self._at_line = None
         self._note_cut_feed(data, plan)
         report.lines_sent += 1
         report.plasma_commands += len(parsed.commands)
@@ -459,7 +565,6 @@ class Sender:
                 self.velocity_percent = command.percent if command.percent > 0 else 100.0
             if starts_cut(command):
                 report.cuts_started += 1
-                self.progress.cut += 1
 
     def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
         """The line as the machine runs it: feed scaled by a velocity reduction."""

@@ -126,20 +126,21 @@ async def test_arc_lost_mid_part_reverse_20_mm_and_resume_overlaps_the_lost_sect
 async def test_forward_through_a_cut_to_the_next_then_recover_beside_the_path(
     tmp_path: Path,
 ) -> None:
-    """Paused by the operator in cut 1 (feed hold): a move along the path ends the cut
-    where the torch stands, then the torch goes forward past the whole of cut 2 into cut
-    3, then a cut recovery offset; the resume pierces beside the path, travels back onto it
-    and finishes cut 3; cut 2 is never burned. A reverse past cut 3's start, an offset
-    beyond the bound and a path move while off the path are refused with the reason."""
+    """Paused by the operator in cut 1 (feed hold): the daemon ends the cut where the
+    torch stands (torch out, raised: invariant 7), then the torch goes forward past the
+    whole of cut 2 into cut 3, then a cut recovery offset; the resume pierces beside the
+    path, travels back onto it and finishes cut 3; cut 2 is never burned. A reverse past
+    cut 3's start, an offset beyond the bound and a path move while off the path are
+    refused with the reason."""
     options = StackOptions(tmp_path, broker="mosquitto", telemetry_hz=10.0)
     seen: dict[str, Any] = {}
 
     async def operator(console: OperatorConsole) -> None:
-        while not console.sender.progress.cut:  # noqa: ASYNC110 - polls the sender's progress
+        while console.telemetry.get("state") != "cutting":  # noqa: ASYNC110 - polls telemetry
             await asyncio.sleep(0.05)
         await asyncio.sleep(1.5)
-        await console.sender.pause()  # the operator's pause, mid-cut: the torch still on
-        stopped = await console.act("path_move", mm=1.0)  # ends the cut first, then moves
+        await console.sender.pause()  # mid-cut: the daemon puts the torch out and raises it
+        stopped = await console.act("path_move", mm=1.0)  # once the program has stopped
         # The rest of cut 1, the rapid to cut 2, cut 2, the rapid to cut 3, 50 mm into it.
         rapid = math.hypot(150.0, 50.0)
         ahead = (200.0 - stopped["x_mm"]) + rapid + 150.0 + rapid + 50.0

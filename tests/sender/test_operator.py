@@ -172,11 +172,15 @@ def test_the_status_line_shows_progress(line: int) -> None:
     sender = Sender(cast(DaemonClient, FakeDaemon()), FakeBackend())
     sender.progress.line, sender.progress.total_lines = line, 12
     console = OperatorConsole(sender, out=io.StringIO(), interactive=False)
-    console.telemetry.update({"voltage_v": 118.25, "z_mm": 1.5, "state": "cutting"})
+    console.telemetry.update(
+        {"voltage_v": 118.25, "target_v": 117.0, "z_mm": 22.26, "height_mm": 1.5,
+         "state": "cutting"}
+    )  # fmt: skip
     text = console.status_line()
     assert f"line {line}/12" in text
-    assert "118.2 V" in text
-    assert " 1.50 mm" in text
+    assert "arc  118.2 V, target 117.0 V" in text
+    assert "height  1.50 mm" in text  # above the plate, not machine Z
+    assert "22.26" not in text
     assert "cutting" in text
     assert text.count("#") == round(line / 12 * 20)
 
