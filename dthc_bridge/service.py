@@ -501,8 +501,14 @@ class ControllerService:
             sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
         elif isinstance(item, fp.Fault):
             name = _fault_name(item.code)
-            self._publish_event(BoardFaulted(t_s, name, item.faults))
-            sequence.on_board_fault(name)
+            if _idle_lapse(item) and not sequence.busy:
+                # The lease ran out with nothing lit and Z at rest (a CPU spike, a stalled
+                # link): the board latched nothing and goes on with the next frame, as the
+                # daemon does: logged, not a fault to re-arm.
+                log.warning("lease_lapsed_idle", t=round(t_s, 3))
+            else:
+                self._publish_event(BoardFaulted(t_s, name, item.faults))
+                sequence.on_board_fault(name)
         self.pump()
 
     def _count_consumables(self, batch: fp.Samples) -> None:
@@ -607,6 +613,11 @@ def feed_samples(
     volts = [cv / 100 for cv in batch.samples_cv]
     sequence.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, t_s)
     return z_mm, xy
+
+
+def _idle_lapse(fault: fp.Fault) -> bool:
+    """The board's report of a lease that ran out while it was at rest: not latched."""
+    return fault.code == fp.FaultCode.LEASE_EXPIRED and fault.detail == fp.LEASE_DETAIL_IDLE
 
 
 def _fault_names(faults: int) -> str:
