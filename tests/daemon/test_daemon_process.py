@@ -190,3 +190,26 @@ async def test_daemon_notifies_systemd_ready_and_watchdog(
             daemon.signal(signal.SIGTERM)
             await asyncio.to_thread(daemon.wait, 5.0)
             daemon.close()
+
+
+async def test_a_daemon_stalled_while_idle_is_not_a_fault_to_rearm(stack: Stack) -> None:
+    """SIGSTOP past the 200 ms lease with nothing lit (a CPU spike as a browser starts):
+    the board reports the lapse and latches nothing, the daemon logs it, and the next cut
+    runs with no re-arm. Stalled mid-cut instead, the lease latches as it always did."""
+    for line in SETUP:
+        assert (await stack.gcode(line))["status"] == "ok"
+    stack.daemon.signal(signal.SIGSTOP)
+    await asyncio.sleep(0.6)
+    stack.daemon.signal(signal.SIGCONT)
+    deadline = time.monotonic() + 5.0
+    while "lease_lapsed_idle" not in stack.daemon.output():
+        assert time.monotonic() < deadline, stack.daemon.output()[-3000:]
+        await asyncio.sleep(0.05)
+    reply = await stack.gcode("M3")
+    assert reply["status"] == "ok", reply  # no "re-arm required"
+    stack.daemon.signal(signal.SIGSTOP)  # now mid-cut: the lease latches
+    await asyncio.sleep(0.6)
+    stack.daemon.signal(signal.SIGCONT)
+    await asyncio.sleep(0.5)
+    refused = await stack.gcode("M3")
+    assert "re-arm required after: board fault: LEASE_EXPIRED" in refused["error"], refused

@@ -114,3 +114,18 @@ async def test_a_pause_from_the_panel_puts_the_relay_off_on_the_emulated_mega(
     off_ms = (first_off - paused_at) * 1000
     assert off_ms < 500, off_ms
     print(json.dumps({"pause_to_relay_off_ms": {"emulated_mega_pin": round(off_ms, 1)}}))
+
+
+async def test_a_new_run_drops_the_hold_and_queue_a_killed_sender_left(tmp_path: Path) -> None:
+    """A sender killed mid-program leaves the gantry held with its lines queued; the next
+    sender's run does not sit waiting for a cycle start: it drops both and runs."""
+    async with Stack(StackOptions(tmp_path, broker="mosquitto")) as stack:
+        dead = stack.motion_backend()
+        await dead.queue("G1 X300 Y300 F600")  # the dead sender's line, never to run
+        await dead.hold()
+        await dead.close()
+        report = await asyncio.wait_for(stack.send(PROGRAM), 60.0)
+        result = await stack.finish(report)
+    assert report.ok, report.error
+    rows = [json.loads(line) for line in result.truth_path.read_text().splitlines()]
+    assert max(r["y_mm"] for r in rows) < 41.0  # the dead sender's line never ran
