@@ -169,3 +169,19 @@ def test_an_interactive_console_says_each_message_once() -> None:
     console = OperatorConsole(sender, out=out, interactive=True)
     console._say("re-armed")
     assert out.getvalue().count("re-armed") == 1
+
+
+async def test_a_hold_from_the_controllers_own_button_is_a_pause_that_ends_the_cut() -> None:
+    """grbl's feed-hold button (or a door switch) holds the motion without the sender: the
+    torch must not burn on at a standstill, so the sender pauses the cut as for p."""
+    daemon, backend = CuttingDaemon(), SlowBackend()
+    sender = Sender(cast(DaemonClient, daemon), backend)
+    console = OperatorConsole(sender, out=io.StringIO(), interactive=False, wait_operator=True)
+    job = asyncio.ensure_future(console.run_job(PROGRAM, dialect=Dialect.MASSO))
+    await until(lambda: sender.progress.line == 6, "the torch never reached the cut")
+    backend.position = Where(60.0, 10.0, 0.0, True)  # held by the controller itself
+    await until(lambda: console.paused is not None, "the held program never paused")
+    assert ("thc_hold", {"on": True}) in daemon.args
+    assert console.operator_stop
+    await console.press("q")
+    await asyncio.wait_for(job, 5.0)
