@@ -75,7 +75,9 @@ def sequence_state(stack: Stack) -> str:
 
 def first_off_after(telemetry: list[dict[str, Any]], t: float) -> float:
     """When the daemon's telemetry first showed the board's relay off after ``t``."""
-    return next(d["received_s"] for d in telemetry if d["received_s"] > t and not d["torch_on"])
+    return float(
+        next(d["received_s"] for d in telemetry if d["received_s"] > t and not d["torch_on"])
+    )
 
 
 async def test_a_pause_from_the_panel_puts_the_torch_out_on_the_mock(tmp_path: Path) -> None:
