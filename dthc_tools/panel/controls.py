@@ -11,6 +11,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from dthc_tools.sender.sender import PAUSED_BY_OPERATOR
+
 from .labels import state_label
 
 __all__ = ["CONTROLS", "Control", "ControlError", "LiveView", "enabled", "route"]
@@ -66,6 +68,13 @@ class LiveView:
         """A sender's program stopped after an error, the torch found on its path."""
         at = (self.progress or {}).get("paused_at")
         return at if self.sender and isinstance(at, Mapping) else None
+
+    @property
+    def operator_stopped(self) -> bool:
+        """The operator paused a lit cut: the program stopped where the torch went out, and
+        cycle start resumes it there (through the start sequence)."""
+        error = str((self.progress or {}).get("error") or "")
+        return self.paused_at is not None and error.endswith(PAUSED_BY_OPERATOR)
 
 
 @dataclass(frozen=True)
@@ -180,6 +189,8 @@ def _state_reason(name: str, view: LiveView) -> str | None:
     if name in VIA_SENDER and not view.sender:
         return NO_SENDER
     if name == "cycle_start":
+        if view.operator_stopped:
+            return None
         if view.running:  # the sender says: the daemon's state runs ahead of its progress
             waiting = progress.get("waiting_cycle_start") or progress.get("operator_paused")
             return None if waiting else "nothing waits for cycle start"
@@ -188,8 +199,9 @@ def _state_reason(name: str, view: LiveView) -> str | None:
         if not view.running:
             return "no program runs"
         return "paused already" if progress.get("operator_paused") else None
-    if name == "stop":
-        return None if view.running or sequence not in IDLE_STATES else "nothing runs"
+    if name == "stop":  # a paused program: ends it (the torch is out already)
+        running = view.running or view.paused_at is not None
+        return None if running or sequence not in IDLE_STATES else "nothing runs"
     if name == "rearm":
         return None if sequence == "faulted" else "nothing to re-arm (no fault)"
     if name in IDLE_TORCH:
@@ -238,6 +250,10 @@ def route(name: str, args: Mapping[str, Any], view: LiveView) -> tuple[str, str,
         if not view.sender:
             raise ControlError(f"{name}: {NO_SENDER}")
         return role, request, request_args
+    if name == "cycle_start" and view.operator_stopped:
+        return role, request, request_args  # resumes where the torch stands
+    if name == "stop" and view.paused_at is not None and not view.running:
+        return "sender", "quit", {}  # the program paused after an error or a pause: end it
     if role == "sender" and not view.running:
         # Without a program running there is no motion to hold. A stop still reaches the
         # daemon itself (it only ever puts the torch out), whoever drives the table.

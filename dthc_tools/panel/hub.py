@@ -26,6 +26,11 @@ log = structlog.get_logger("dthc_tools.panel")
 
 VIEW_PERIOD_S = 0.2  # the link state is looked at this often; the rest pushes on change
 PAGE_QUEUE = 256  # messages an open page may fall behind by before the oldest are dropped
+# The state's measurements, which change at every poll during a cut: pages get them from the
+# telemetry (10/s), so a view is pushed when something else changes (a view is a full redraw).
+MEASURED = frozenset({
+    "voltage_v", "target_v", "slow_target_v", "z_mm", "height_mm", "work_z_mm", "locks",
+})  # fmt: skip
 
 
 class PanelHub:
@@ -100,7 +105,7 @@ class PanelHub:
         view = self.view
         return {
             "broker": view.broker, "daemon": view.daemon, "board": view.board,
-            "state": view.state, "sender": view.sender,
+            "state": _shown_state(view.state), "sender": view.sender,
             "progress": view.progress if view.sender else None,
             "materials": view.materials, "controls": enabled(view),
             "params_shown": describe_params((view.state or {}).get("params")),
@@ -161,3 +166,16 @@ class PanelHub:
         if not self.client.daemon_online:
             raise ControlError(f"{name}: the daemon is offline")
         return await self.client.request(request, **request_args)
+
+
+def _shown_state(state: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """The daemon's state as the view carries it: without the measurements (MEASURED), and
+    the consumables' arc-on time in whole seconds (it grows at every poll while the arc
+    burns; the page shows seconds)."""
+    if state is None:
+        return None
+    shown = {key: value for key, value in state.items() if key not in MEASURED}
+    consumables = shown.get("consumables")
+    if isinstance(consumables, Mapping) and isinstance(consumables.get("arc_on_s"), int | float):
+        shown["consumables"] = {**consumables, "arc_on_s": int(consumables["arc_on_s"])}
+    return shown

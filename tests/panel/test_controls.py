@@ -180,3 +180,23 @@ def test_material_select_and_consumables_reset_go_to_the_daemon_without_a_board(
     )  # fmt: skip
     with pytest.raises(ControlError, match="material number: required"):
         route("material_select", {}, board_gone)
+
+
+def test_a_cut_paused_from_the_page_resumes_with_cycle_start_and_stop_ends_it() -> None:
+    """Pausing a lit cut stops the program where the torch went out (the sender's
+    ``paused_at``, its error 'paused: paused by the operator'): cycle start resumes it there
+    (the sender's cycle_start), Stop ends it (the sender's quit). A program stopped by an
+    error is not resumed by cycle start (resume here or restart, after a look)."""
+    stopped = paused(cut=1)
+    stopped.state = {"state": "idle"}
+    assert stopped.progress is not None
+    stopped.progress = {**stopped.progress, "error": "paused: paused by the operator"}
+    assert stopped.operator_stopped
+    assert {"cycle_start", "stop", "resume_here", "ohmic_test"} <= allowed(stopped)
+    assert route("cycle_start", {}, stopped) == ("sender", "cycle_start", {})
+    assert route("stop", {}, stopped) == ("sender", "quit", {})
+    by_error = paused()
+    by_error.progress = {**(by_error.progress or {}), "error": "arc lost"}
+    assert not by_error.operator_stopped
+    assert enabled(by_error)["cycle_start"] == "nothing waits for cycle start"
+    assert route("stop", {}, by_error) == ("sender", "quit", {})

@@ -287,3 +287,22 @@ async def test_the_page_gets_the_operators_words(
     assert [(row["label"], row["text"]) for row in shown] == [
         ("Touch-off feed", "300 mm/min"), ("Cut voltage", "auto"),
     ]  # fmt: skip
+
+
+async def test_a_view_is_pushed_when_the_table_changes_not_at_every_measurement(
+    hub: RecordingHub,
+) -> None:
+    """The state's measured values (volts, Z, height) change at every poll during a cut;
+    pages get them from the telemetry, so they leave the view and a new one is pushed only
+    when something the view shows changes."""
+    async with hub.page() as queue:
+        for volts in (120.0, 121.0, 122.5):
+            cutting = {"state": "cutting", "voltage_v": volts, "z_mm": volts / 10,
+                       "consumables": {"pierces": 3, "arc_on_s": 60.0 + volts / 1000}}  # fmt: skip
+            hub._on_state("dthc/table1/state", {**cutting, "thc_enabled": True})
+        hub._on_state("dthc/table1/state", {"state": "to_safe_height", "thc_enabled": True})
+        kinds = [json.loads(queue.get_nowait())["kind"] for _ in range(queue.qsize())]
+    assert kinds == ["view", "view", "view"]  # the first, cutting, then to_safe_height
+    assert "voltage_v" not in hub.snapshot()["state"]
+    hub._on_state("dthc/table1/state", {"consumables": {"pierces": 3, "arc_on_s": 60.9}})
+    assert hub.snapshot()["state"]["consumables"] == {"pierces": 3, "arc_on_s": 60}
