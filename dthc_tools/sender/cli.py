@@ -12,6 +12,7 @@ from pathlib import Path
 
 import aiomqtt
 
+from dthc_bridge.logs import configure_logging
 from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_bridge.program.options import add_dialect_options
 from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
@@ -94,9 +95,12 @@ async def _send(args: argparse.Namespace) -> int:
     daemon = DaemonClient(args.broker_settings, base_topic=args.base_topic, board_id=args.board_id)
     backend = await _backend(args)
     sender = Sender(daemon, backend, auto_cycle_start=args.yes_cycle_start)
-    console = OperatorConsole(
-        sender, interactive=_interactive() and not args.json, wait_operator=args.wait_operator
-    )
+    interactive = _interactive() and not args.json
+    if interactive:
+        # The console owns the terminal and says each message once, in the operator's
+        # words: the log's warnings would repeat them between its redraws.
+        configure_logging("error")
+    console = OperatorConsole(sender, interactive=interactive, wait_operator=args.wait_operator)
     # A panel's controls: the console's actions as MQTT requests.
     remote = OperatorRemote(sender, daemon, program=str(args.program), console=console)
     try:

@@ -425,7 +425,7 @@ class Sender:
                     await self._hold()
                 else:
                     await self._stop_machine()
-                log.warning("program_stopped", line=number, error=report.error)
+                log.warning("program_stopped", line=report.error_line, error=report.error)
                 report.warnings = plan.warnings
                 return report
         try:
@@ -436,6 +436,7 @@ class Sender:
         if self._pause.is_set() and not report.error:
             report.error, report.error_line = f"paused: {self._pause_reason}", number
         if not report.error:
+            self.progress.line = len(lines)  # the torch has run the whole file
             # At its end: PlasmaC resets the height override; an old daemon without the
             # request still answers, with an error, and ran the program just the same.
             with contextlib.suppress(DaemonError):
