@@ -419,6 +419,19 @@ async def _preview_material_and_pause(
         browser.driver.save_screenshot, str(_screenshot(workdir, "panel-paused.png"))
     )
 
+    # Paused with the torch out, the table is idle: Z jogs and the probe test are allowed,
+    # through the sender (the broker lets only its user move Z).
+    z = await browser.js("return window.lastTelemetry.z_mm;")
+    await browser.click("[data-control=jog_up]")  # the page's step: 1 mm
+    await browser.until("document.querySelector('#answer').textContent === 'Z up ▲: done'", 10)
+    await browser.until("window.lastTelemetry.z_mm >= arguments[0] + 0.95", 5, z)
+    await browser.click("[data-control=probe_test]")
+    probed = await browser.until(
+        "document.querySelector('#answer').textContent.startsWith('Probe test: done') && "
+        "document.querySelector('#answer').textContent", 20,
+    )  # fmt: skip
+    assert probed.startswith("Probe test: done (plate at Z "), probed
+
     await browser.click("[data-control=stop]")
     await asyncio.to_thread(sender.communicate, timeout=30)
     # The history's record of that cut names material 12.
@@ -463,6 +476,13 @@ async def _input_lights(stack: Stack, browser: Browser) -> None:
 
 
 async def _refusals_and_links(stack: Stack, browser: Browser) -> None:
+    # New electrode and nozzle: two presses reset the counters (the daemon keeps them).
+    await browser.click("#consumables-reset")
+    assert await browser.js("return document.querySelector('#r-pierces').textContent;") != "0"
+    await browser.click("#consumables-reset")
+    await browser.until("document.querySelector('#r-pierces').textContent === '0'", 5)
+    assert await browser.js("return document.querySelector('#r-arc-on').textContent;") == "0 s"
+
     # A material edit the daemon refuses: its error, naming the field, on the page.
     await browser.click("#material-add")
     await browser.js(

@@ -370,6 +370,11 @@ function showAnswer(answer, name) {
     const [suffix, unit] = units.find(([end]) => key.endsWith(end)) || ["", ""];
     return `${key.slice(0, key.length - suffix.length).replace(/_/g, " ")} ${value}${unit}`;
   });
+  const point = window.lastTelemetry;
+  if (name === "probe_test" && !figures.length && point && num(point.z_mm) && num(point.height_mm)) {
+    // The plate as just probed: the height above plate is measured from it from now on.
+    figures.push(`plate at Z ${(point.z_mm - point.height_mm).toFixed(2)} mm`);
+  }
   line.textContent = `${controlWords[name] || name}: done${figures.length ? ` (${figures.join(", ")})` : ""}`;
 }
 
