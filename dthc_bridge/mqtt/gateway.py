@@ -31,6 +31,7 @@ from paho.mqtt.subscribeoptions import SubscribeOptions
 from ..backoff import backoff_delay_s
 from ..controller.dialect import Dialect
 from .broker import BrokerRefused, describe_broker_error, is_refusal
+from .cancellation import honour_cancellation
 from .denials import DenialWatch
 from .outbox import Outbox, Outgoing
 from .payloads import (
@@ -506,7 +507,7 @@ class MqttGateway:
 
     async def _send_outbox(self, client: aiomqtt.Client) -> None:
         while True:
-            _honour_cancellation()
+            honour_cancellation()
             item = await self._outbox.get()
             await self._publish_item(client, item, timeout_s=None)
 
@@ -576,7 +577,7 @@ class MqttGateway:
 
     async def _watch_state(self, client: aiomqtt.Client) -> None:
         while True:
-            _honour_cancellation()
+            honour_cancellation()
             await asyncio.sleep(self.settings.state_poll_s)
             await self._publish_board(client)
             await self._publish_state(client)
@@ -584,7 +585,7 @@ class MqttGateway:
 
     async def _send_diagnostics(self, client: aiomqtt.Client) -> None:
         while True:
-            _honour_cancellation()
+            honour_cancellation()
             await asyncio.sleep(self.settings.diagnostics_period_s)
             await self._publish_diagnostics(client)
 
@@ -592,7 +593,7 @@ class MqttGateway:
         period_s = 1.0 / self.settings.telemetry_hz
         last: bytes | None = None
         while True:
-            _honour_cancellation()
+            honour_cancellation()
             point = self._safely("telemetry", self.controller.telemetry)
             if point is not None:
                 payload = encode_json(point)
@@ -652,17 +653,6 @@ class MqttGateway:
             task.cancel()
         if pending:
             await asyncio.wait(pending)
-
-
-def _honour_cancellation() -> None:
-    """Raise CancelledError if this task was asked to stop. Python 3.11's asyncio.wait_for
-    (inside aiomqtt's QoS 1 publish) returns normally when the PUBACK lands as the task is
-    cancelled (CPython gh-86296): a publishing loop then runs on, and the TaskGroup that
-    cancelled it, which does not cancel twice, waits for it forever (the gateway, and so the
-    daemon, would never stop). Each loop asks at the top of every turn."""
-    task = asyncio.current_task()
-    if task is not None and task.cancelling():
-        raise asyncio.CancelledError
 
 
 def _codes(granted: object) -> list[object]:

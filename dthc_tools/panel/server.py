@@ -31,6 +31,7 @@ import structlog
 from aiohttp import web
 from aiohttp.typedefs import Middleware
 
+from dthc_bridge.mqtt.cancellation import honour_cancellation
 from dthc_tools.sender.daemon_client import DaemonError
 
 from .connections import HEADER_TIMEOUT_S, MAX_CONNECTIONS, ConnectionLimits, request_started
@@ -144,6 +145,7 @@ def build_app(
             quiet_since = loop.time()
             async with hub.page() as queue:
                 while True:
+                    honour_cancellation()  # 3.11's wait_for may swallow it (cancellation.py)
                     try:
                         message = await asyncio.wait_for(queue.get(), STREAM_CHECK_S)
                     except TimeoutError:

@@ -205,7 +205,9 @@ class OperatorConsole:
                     lines, start_line=start_line, dialect=dialect, codes=codes, resume=resume
                 )
                 whole = report if whole is None else _merged(whole, report)
-                if report.ok or not self.waits:
+                # An operator's pause is waited on whoever paused (a panel, the controller's
+                # hold button): it is there to be resumed, not an end.
+                if report.ok or not (self.waits or report.operator_paused):
                     return whole
                 self.operator_stop = report.operator_paused
                 if report.operator_paused:

@@ -17,6 +17,7 @@ import structlog
 
 from dthc_bridge.backoff import backoff_delay_s
 from dthc_bridge.mqtt.broker import BrokerSettings
+from dthc_bridge.mqtt.cancellation import honour_cancellation
 
 __all__ = ["INVALID", "DaemonClient", "DaemonError"]
 
@@ -229,6 +230,7 @@ class DaemonClient:
 
     async def _pump(self, client: aiomqtt.Client) -> None:
         async for message in client.messages:
+            honour_cancellation()  # a republish may have swallowed it (cancellation.py)
             try:
                 document = json.loads(bytes(message.payload))
             except ValueError:

@@ -32,6 +32,8 @@ from typing import Any
 
 import structlog
 
+from dthc_bridge.mqtt.cancellation import honour_cancellation
+
 from .backend import BackendError
 from .console import PAUSED_ACTIONS, OperatorConsole
 from .daemon_client import INVALID, DaemonClient, DaemonError
@@ -156,6 +158,7 @@ class OperatorRemote:
         drawn: object = None  # the path last published (one per program start)
         try:
             while True:
+                honour_cancellation()  # a QoS 1 publish may swallow it (cancellation.py)
                 path = self.sender.path
                 if path is not None and path is not drawn:
                     await self.client.publish(

@@ -4,6 +4,7 @@ exactly one response on ``sender/response/<name>``; the progress goes out retain
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import Callable
 from typing import Any, cast
 
@@ -149,3 +150,26 @@ async def test_a_panels_torch_and_height_controls_are_forwarded_to_the_daemon_on
     response = await broker.press(name, {**args, "transaction": "p-7"})
     assert response == {"status": "ok", "data": {}, "transaction": "p-7"}
     assert broker.args == [(name, args)]
+
+
+class SwallowingBroker(Broker):
+    """A QoS 1 publish that returns as if done when cancelled (3.11's wait_for, gh-86296)."""
+
+    async def publish(self, leaf: str, document: dict[str, Any], *, retain: bool = False) -> None:
+        with contextlib.suppress(asyncio.CancelledError):
+            await asyncio.sleep(0.3)
+        self.published.append((leaf, document, retain))
+
+
+async def test_the_progress_loop_stops_even_when_a_publish_swallows_its_cancellation() -> None:
+    """Else ``dthc-bridge send`` never exits after its program (the loop runs on)."""
+    broker = SwallowingBroker()
+    sender, remote = remote_for(broker)
+    publishing = asyncio.create_task(remote.publish_progress())
+    await asyncio.sleep(0.1)  # inside the first publish
+    publishing.cancel()
+    for _ in range(10):
+        sender.progress.line += 1  # a change: a loop running on would publish again
+        await asyncio.sleep(0.1)
+    assert publishing.done()
+    assert len(broker.published) <= 2  # the one it was in, and the last on the way out
