@@ -100,19 +100,27 @@ def _material(args: Mapping[str, Any]) -> dict[str, Any]:
     return dict(args)
 
 
-def _path(sign: float) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
-    """Paused motion: ``mm`` (a distance, the page's step) back or forward, at its feed."""
+def _distance(
+    word: str, sign: float, default_mm: float, max_mm: float
+) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    """``mm`` (a distance, the page's step: 0 to ``max_mm``) signed by ``sign``, with the
+    page's ``feed_mm_min`` passed on for the one who moves to check."""
 
     def args(given: Mapping[str, Any]) -> dict[str, Any]:
-        mm = given.get("mm", PATH_STEP_MM)
-        if isinstance(mm, bool) or not isinstance(mm, int | float) or not 0 < mm <= 1000:
-            raise ControlError(f"path mm: {mm!r} must be a distance of 0 to 1000 mm")
+        mm = given.get("mm", default_mm)
+        if isinstance(mm, bool) or not isinstance(mm, int | float) or not 0 < mm <= max_mm:
+            raise ControlError(f"{word} mm: {mm!r} must be a distance of 0 to {max_mm:g} mm")
         out: dict[str, Any] = {"mm": sign * float(mm)}
         if "feed_mm_min" in given:
-            out["feed_mm_min"] = given["feed_mm_min"]  # the sender checks it
+            out["feed_mm_min"] = given["feed_mm_min"]
         return out
 
     return args
+
+
+def _path(sign: float) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
+    """Paused motion: back or forward along the path (the sender checks the feed)."""
+    return _distance("path", sign, PATH_STEP_MM, 1000.0)
 
 
 def _offset(given: Mapping[str, Any]) -> dict[str, Any]:
@@ -121,18 +129,8 @@ def _offset(given: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _jog(sign: float) -> Callable[[Mapping[str, Any]], dict[str, Any]]:
-    """Z up (+) or down (-) by ``mm`` (the page's step, 0 to JOG_MAX_MM), at its feed."""
-
-    def args(given: Mapping[str, Any]) -> dict[str, Any]:
-        mm = given.get("mm", JOG_STEP_MM)
-        if isinstance(mm, bool) or not isinstance(mm, int | float) or not 0 < mm <= JOG_MAX_MM:
-            raise ControlError(f"jog mm: {mm!r} must be a distance of 0 to {JOG_MAX_MM:g} mm")
-        out: dict[str, Any] = {"mm": sign * float(mm)}
-        if "feed_mm_min" in given:
-            out["feed_mm_min"] = given["feed_mm_min"]  # the daemon checks it
-        return out
-
-    return args
+    """Z up (+) or down (-) (the daemon checks the feed)."""
+    return _distance("jog", sign, JOG_STEP_MM, JOG_MAX_MM)
 
 
 def _material_number(args: Mapping[str, Any]) -> dict[str, Any]:
