@@ -27,7 +27,7 @@ import firmware_protocol as fp
 from .board import BoardClient, Telemetry
 from .consumables import ConsumableLog
 from .controller import actions as act
-from .controller.commands import Abort, Command, CommandError, CycleStart, ThcHold
+from .controller.commands import Abort, Command, CommandError, CycleStart, ProbeTest, ThcHold
 from .controller.dialect import Dialect
 from .controller.gcode import parse_host_motion, parse_line, parse_request
 from .controller.plasma import PlasmaController
@@ -361,7 +361,11 @@ class ControllerService:
                 raise
             finally:
                 self._reply = None
-            return CommandResult(reply.ok, {"command": reply.command}, reply.error)
+            data: dict[str, object] = {"command": reply.command}
+            if isinstance(command, ProbeTest) and reply.ok:
+                surface = self.sequence.surface_mm  # what the operator tested for
+                data["surface_z_mm"] = None if surface is None else round(surface, 3)
+            return CommandResult(reply.ok, data, reply.error)
 
     def _apply(self, command: Command, xy_mm: tuple[float, float] | None) -> CommandResult | None:
         """Apply a command and take the sequence's actions: its result, or None when the

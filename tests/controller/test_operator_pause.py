@@ -62,6 +62,7 @@ def test_a_probe_test_touches_off_and_returns_to_where_z_was() -> None:
     start = loop.plant.zaxis.position_mm
     reply = loop.request("probe_test")
     assert reply.ok, reply.error
+    assert reply.data["surface_z_mm"] == pytest.approx(loop.plant.surface_z_mm, abs=0.15)
     assert loop.sequence.state is State.IDLE
     assert loop.plant.zaxis.position_mm == pytest.approx(start, abs=0.01)
     assert loop.sequence.surface_mm == pytest.approx(loop.plant.surface_z_mm, abs=0.15)
