@@ -49,6 +49,7 @@ from .messages import (
     Torch,
     ZMove,
     ZProbe,
+    ZProbeAway,
     ZStop,
     ZVelocity,
 )
@@ -88,6 +89,7 @@ LAYOUTS: Final[dict[type[Any], tuple[MsgType, str]]] = {
     Query: (MsgType.QUERY, "B"),
     ClockQuery: (MsgType.CLOCK_QUERY, ""),
     FaultReset: (MsgType.FAULT_RESET, "H"),
+    ZProbeAway: (MsgType.Z_PROBE_AWAY, "IIH"),
     Ack: (MsgType.ACK, "I"),
     Nak: (MsgType.NAK, "IBB"),
     HelloInfo: (MsgType.HELLO_INFO, "BBBBBBI16sHBIiiHH"),

@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 PROTOCOL_MAJOR: Final = 1
-PROTOCOL_MINOR: Final = 1  # 1.1: the idle lease lapse (PROTOCOL.md §4)
+PROTOCOL_MINOR: Final = 2  # 1.1: the idle lease lapse (§4); 1.2: Z_PROBE_AWAY (§6.1)
 
 DELIMITER: Final = 0x00
 # Decoded frame = type(1) seq(1) payload(0..MAX_PAYLOAD) crc(2).
@@ -95,6 +95,7 @@ class MsgType(IntEnum):
     QUERY = 0x0C
     CLOCK_QUERY = 0x0D
     FAULT_RESET = 0x0E
+    Z_PROBE_AWAY = 0x0F  # since 1.2
 
     ACK = 0x80
     NAK = 0x81
@@ -124,7 +125,7 @@ class InputBit(IntEnum):
 
 class InputMask(IntFlag):
     """The same inputs as masks over the snapshot (``1 << InputBit``), and as sensor sets
-    (ZProbe's ``sensors``)."""
+    (ZProbe's and ZProbeAway's ``sensors``)."""
 
     ARC_OK = 1 << InputBit.ARC_OK
     OHMIC = 1 << InputBit.OHMIC
@@ -195,10 +196,15 @@ class ResetReason(IntEnum):
 
 
 class ProbeOutcome(IntEnum):
+    """PROBE_RESULT.result. CONTACT/NO_CONTACT end a Z_PROBE (down, until a sensor is
+    active), RELEASED/NO_RELEASE a Z_PROBE_AWAY (up, until every sensor is inactive; 1.2)."""
+
     CONTACT = 0
     NO_CONTACT = 1  # max travel reached
     ABORTED = 2  # Z_STOP, fault or lease expiry
-    LIMIT = 3  # Z soft limit reached before contact or max travel
+    LIMIT = 3  # Z soft limit reached before contact (release) or max travel
+    RELEASED = 4  # Z_PROBE_AWAY: every sensor of the set inactive
+    NO_RELEASE = 5  # Z_PROBE_AWAY: max travel reached with a sensor still active
 
 
 class MotionResult(IntEnum):

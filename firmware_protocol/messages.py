@@ -42,6 +42,7 @@ __all__ = [
     "Torch",
     "ZMove",
     "ZProbe",
+    "ZProbeAway",
     "ZStop",
     "ZVelocity",
 ]
@@ -90,6 +91,16 @@ class ZMove(NamedTuple):
 
 class ZProbe(NamedTuple):
     """Move Z down until a sensor in ``sensors`` (input bits) closes; PROBE_RESULT follows."""
+
+    seq: int
+    feed_um_s: int
+    max_travel_um: int
+    sensors: int
+
+
+class ZProbeAway(NamedTuple):
+    """Move Z up until every sensor in ``sensors`` is inactive (released), for at most
+    ``max_travel_um`` (LinuxCNC's G38.4/G38.5 on Z; protocol 1.2); PROBE_RESULT follows."""
 
     seq: int
     feed_um_s: int
@@ -232,10 +243,10 @@ class MotionDone(NamedTuple):
 
 
 class ProbeResult(NamedTuple):
-    seq: int  # the Z_PROBE it ends
+    seq: int  # the Z_PROBE or Z_PROBE_AWAY it ends
     result: int
-    sensor: int  # input bits that ended the probe
-    contact_z_um: int
+    sensor: int  # input bits that ended the probe (PROTOCOL.md §6.2)
+    contact_z_um: int  # Z at contact (Z_PROBE) or release (Z_PROBE_AWAY), else stop_z_um
     stop_z_um: int
     t_us: int
 
@@ -278,6 +289,7 @@ HostMessage = (
     | Query
     | ClockQuery
     | FaultReset
+    | ZProbeAway
 )
 BoardMessage = (
     Ack | Nak | HelloInfo | Samples | Event | Fault | MotionDone | ProbeResult | Status | Clock
@@ -301,6 +313,7 @@ HOST_MESSAGES: tuple[type[HostMessage], ...] = (
     Query,
     ClockQuery,
     FaultReset,
+    ZProbeAway,
 )
 BOARD_MESSAGES: tuple[type[BoardMessage], ...] = (
     Ack,

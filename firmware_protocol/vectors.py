@@ -69,6 +69,8 @@ def message_cases() -> list[tuple[str, m.Message]]:
         ("query_probe_result", m.Query(15, QueryWhat.PROBE_RESULT)),
         ("clock_query", m.ClockQuery(16)),
         ("fault_reset_all", m.FaultReset(17, 0xFFFF)),
+        # 1.2: lift off the float switch, 0.5 mm at most, at 20 mm/min (G38.4 Z0.5 F20).
+        ("z_probe_away_float", m.ZProbeAway(18, 333, 500, InputMask.FLOAT)),
         ("ack", m.Ack(4, _BOOT_ID)),
         ("nak_fault_latched", m.Nak(4, _BOOT_ID, NakCode.FAULT_LATCHED, FaultCode.LEASE_EXPIRED)),
         ("nak_out_of_range", m.Nak(3, _BOOT_ID, NakCode.OUT_OF_RANGE, 0)),
@@ -183,6 +185,10 @@ def message_cases() -> list[tuple[str, m.Message]]:
         (
             "probe_result_float",
             m.ProbeResult(9, ProbeOutcome.CONTACT, InputMask.FLOAT, 18_500, 18_430, 5_000_000),
+        ),
+        (
+            "probe_result_released",
+            m.ProbeResult(18, ProbeOutcome.RELEASED, InputMask.FLOAT, 18_620, 18_624, 5_500_000),
         ),
         (
             "status",

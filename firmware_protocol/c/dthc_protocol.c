@@ -85,7 +85,7 @@ uint16_t dthc_crc16(const uint8_t *data, size_t len)
  * gap. Explicit tables in flash, not a switch: gcc turns such a switch into a 137-byte lookup
  * table that avr-gcc puts in RAM. */
 #define DTHC_NO_TYPE 0xFFu
-static const uint8_t dthc_host_sizes[DTHC_MSG_FAULT_RESET] DTHC_FLASH_ATTR = {
+static const uint8_t dthc_host_sizes[DTHC_MSG_Z_PROBE_AWAY] DTHC_FLASH_ATTR = {
     6,  /* 0x01 HELLO */
     0,  /* 0x02 HEARTBEAT */
     2,  /* 0x03 SET_LEASE */
@@ -100,6 +100,7 @@ static const uint8_t dthc_host_sizes[DTHC_MSG_FAULT_RESET] DTHC_FLASH_ATTR = {
     1,  /* 0x0C QUERY */
     0,  /* 0x0D CLOCK_QUERY */
     2,  /* 0x0E FAULT_RESET */
+    10, /* 0x0F Z_PROBE_AWAY */
 };
 static const uint8_t dthc_board_sizes[DTHC_MSG_CLOCK - DTHC_MSG_ACK + 1] DTHC_FLASH_ATTR = {
     4,                        /* 0x80 ACK */
@@ -117,7 +118,7 @@ static const uint8_t dthc_board_sizes[DTHC_MSG_CLOCK - DTHC_MSG_ACK + 1] DTHC_FL
 int dthc_payload_size(uint8_t type)
 {
     uint8_t size = DTHC_NO_TYPE;
-    if (type >= DTHC_MSG_HELLO && type <= DTHC_MSG_FAULT_RESET) {
+    if (type >= DTHC_MSG_HELLO && type <= DTHC_MSG_Z_PROBE_AWAY) {
         size = DTHC_FLASH_READ_BYTE(&dthc_host_sizes[type - DTHC_MSG_HELLO]);
     } else if (type >= DTHC_MSG_ACK && type <= DTHC_MSG_CLOCK) {
         size = DTHC_FLASH_READ_BYTE(&dthc_board_sizes[type - DTHC_MSG_ACK]);
@@ -605,6 +606,7 @@ static void put_payload(sink_t *s, const dthc_msg_t *msg)
         put_u32(s, msg->u.z_move.feed_um_s);
         break;
     case DTHC_MSG_Z_PROBE:
+    case DTHC_MSG_Z_PROBE_AWAY:
         put_u32(s, msg->u.z_probe.feed_um_s);
         put_u32(s, msg->u.z_probe.max_travel_um);
         put_u16(s, msg->u.z_probe.sensors);
@@ -844,6 +846,7 @@ int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out)
         m->u.z_move.feed_um_s = dthc_get_u32(p + 4);
         break;
     case DTHC_MSG_Z_PROBE:
+    case DTHC_MSG_Z_PROBE_AWAY:
         m->u.z_probe.feed_um_s = dthc_get_u32(p);
         m->u.z_probe.max_travel_um = dthc_get_u32(p + 4);
         m->u.z_probe.sensors = dthc_get_u16(p + 8);

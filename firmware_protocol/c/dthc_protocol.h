@@ -63,7 +63,8 @@ extern "C" {
 /* --- numbers (PROTOCOL.md sections 1-4, 8; firmware_protocol/constants.py) ------------- */
 
 #define DTHC_PROTOCOL_MAJOR 1
-#define DTHC_PROTOCOL_MINOR 1 /* 1.1: the idle lease lapse (PROTOCOL.md section 4) */
+/* 1.1: the idle lease lapse (PROTOCOL.md section 4); 1.2: Z_PROBE_AWAY (section 6.1) */
+#define DTHC_PROTOCOL_MINOR 2
 
 #define DTHC_DELIMITER 0x00
 /* Decoded frame = type(1) seq(1) payload(0..DTHC_MAX_PAYLOAD) crc(2). */
@@ -140,6 +141,7 @@ typedef enum {
     DTHC_MSG_QUERY = 0x0C,
     DTHC_MSG_CLOCK_QUERY = 0x0D,
     DTHC_MSG_FAULT_RESET = 0x0E,
+    DTHC_MSG_Z_PROBE_AWAY = 0x0F, /* since 1.2; payload as Z_PROBE (u.z_probe) */
 
     DTHC_MSG_ACK = 0x80,
     DTHC_MSG_NAK = 0x81,
@@ -225,7 +227,9 @@ typedef enum {
     DTHC_PROBE_CONTACT = 0,
     DTHC_PROBE_NO_CONTACT = 1, /* max travel reached */
     DTHC_PROBE_ABORTED = 2,    /* Z_STOP, fault or lease expiry */
-    DTHC_PROBE_LIMIT = 3       /* Z soft limit reached first */
+    DTHC_PROBE_LIMIT = 3,      /* Z soft limit reached first */
+    DTHC_PROBE_RELEASED = 4,   /* Z_PROBE_AWAY: every sensor of the set inactive (1.2) */
+    DTHC_PROBE_NO_RELEASE = 5  /* Z_PROBE_AWAY: max travel reached, a sensor still active */
 } dthc_probe_result_code_t;
 
 typedef enum {
@@ -276,7 +280,7 @@ typedef struct {
     uint32_t feed_um_s;
     uint32_t max_travel_um;
     uint16_t sensors; /* input bit mask */
-} dthc_z_probe_t;
+} dthc_z_probe_t; /* Z_PROBE and Z_PROBE_AWAY */
 typedef struct { uint16_t stream_seq; int32_t velocity_um_s; uint16_t expiry_ms; } dthc_z_velocity_t;
 typedef struct { uint8_t unused_; } dthc_z_stop_t;
 typedef struct { uint16_t current_da; } dthc_set_current_t;

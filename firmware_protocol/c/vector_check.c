@@ -69,6 +69,7 @@ static const char *msg_name(uint8_t type)
     case DTHC_MSG_OHMIC_SENSE: return "OhmicSense";
     case DTHC_MSG_Z_MOVE: return "ZMove";
     case DTHC_MSG_Z_PROBE: return "ZProbe";
+    case DTHC_MSG_Z_PROBE_AWAY: return "ZProbeAway";
     case DTHC_MSG_Z_VELOCITY: return "ZVelocity";
     case DTHC_MSG_Z_STOP: return "ZStop";
     case DTHC_MSG_SET_CURRENT: return "SetCurrent";
@@ -142,6 +143,7 @@ static void print_fields(const dthc_msg_t *m)
         pu("feed_um_s", m->u.z_move.feed_um_s);
         break;
     case DTHC_MSG_Z_PROBE:
+    case DTHC_MSG_Z_PROBE_AWAY:
         pu("feed_um_s", m->u.z_probe.feed_um_s);
         pu("max_travel_um", m->u.z_probe.max_travel_um);
         pu("sensors", m->u.z_probe.sensors);
@@ -293,7 +295,8 @@ static void print_constants(void)
     K(DTHC_MSG_HELLO); K(DTHC_MSG_HEARTBEAT); K(DTHC_MSG_SET_LEASE); K(DTHC_MSG_TORCH);
     K(DTHC_MSG_OHMIC_SENSE); K(DTHC_MSG_Z_MOVE); K(DTHC_MSG_Z_PROBE); K(DTHC_MSG_Z_VELOCITY);
     K(DTHC_MSG_Z_STOP); K(DTHC_MSG_SET_CURRENT); K(DTHC_MSG_CONFIGURE); K(DTHC_MSG_QUERY);
-    K(DTHC_MSG_CLOCK_QUERY); K(DTHC_MSG_FAULT_RESET); K(DTHC_MSG_ACK); K(DTHC_MSG_NAK);
+    K(DTHC_MSG_CLOCK_QUERY); K(DTHC_MSG_FAULT_RESET); K(DTHC_MSG_Z_PROBE_AWAY);
+    K(DTHC_MSG_ACK); K(DTHC_MSG_NAK);
     K(DTHC_MSG_HELLO_INFO); K(DTHC_MSG_SAMPLES); K(DTHC_MSG_EVENT); K(DTHC_MSG_FAULT);
     K(DTHC_MSG_MOTION_DONE); K(DTHC_MSG_PROBE_RESULT); K(DTHC_MSG_STATUS); K(DTHC_MSG_CLOCK);
 
@@ -319,7 +322,7 @@ static void print_constants(void)
     K(DTHC_RESET_BROWNOUT); K(DTHC_RESET_EXTERNAL); K(DTHC_RESET_UNKNOWN);
 
     K(DTHC_PROBE_CONTACT); K(DTHC_PROBE_NO_CONTACT); K(DTHC_PROBE_ABORTED);
-    K(DTHC_PROBE_LIMIT);
+    K(DTHC_PROBE_LIMIT); K(DTHC_PROBE_RELEASED); K(DTHC_PROBE_NO_RELEASE);
 
     K(DTHC_MOTION_REACHED); K(DTHC_MOTION_STOPPED); K(DTHC_MOTION_LIMIT);
     K(DTHC_MOTION_FAULT); K(DTHC_MOTION_SUPERSEDED);
