@@ -37,6 +37,7 @@ from ..controller.words import cutting_feed_mm_min
 from ..materials import Material, MaterialError, MaterialStore
 from .options import add_daemon_options, add_dialect_options
 from .plan import DaemonStep, DwellStep, ProgramPlan, Refused, detect_dialect
+from .xypath import PathTracer, path_entries
 
 __all__ = ["CheckReport", "CutReport", "add_arguments", "check_program", "run_from_args"]
 
@@ -65,6 +66,7 @@ class CheckReport:
     cuts: list[CutReport] = field(default_factory=list)
     refused: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    path: list[dict[str, Any]] = field(default_factory=list)  # the planned XY moves, mm
 
     @property
     def ok(self) -> bool:
@@ -81,6 +83,7 @@ class CheckReport:
             "cuts": [asdict(cut) for cut in self.cuts],
             "refused": self.refused,
             "warnings": self.warnings,
+            "path": self.path,
         }
 
 
@@ -235,7 +238,9 @@ def check_program(
     controller.sequence.plasma_mode = plasma_mode_at_start
     plan.cut_feed_mm_min = controller.begin_program()["cut_feed_mm_min"]
     model = _Model(plan, controller)
-    for step in plan.steps():
+    tracer = PathTracer(plan)
+    for index, step in enumerate(plan.steps()):
+        tracer.step(index, step)
         if isinstance(step, Refused):
             report.refuse(step.source_line, step.text, step.error)
             continue
@@ -259,6 +264,7 @@ def check_program(
             f"{plan.z_stripped} Z moves stripped (PlasmaC; #<keep-z-motion> = 1 keeps them)"
         )
     report.warnings.extend(plan.warnings)
+    report.path = path_entries(tracer.segments)
     return report
 
 
