@@ -1,18 +1,28 @@
-"""Find LinuxCNC's ``plasmac.so`` and build the HAL shim that hosts it.
+"""Find LinuxCNC's ``plasmac.so`` and build the HAL shim that hosts it; find LinuxCNC's
+standalone G-code interpreter ``rs274``.
 
 LinuxCNC is GPL-2: nothing of it is in this repository. The component comes from the user's
 own Debian package ``linuxcnc-uspace``, downloaded with ``apt-get download`` into a cache
 directory and unpacked with ``dpkg-deb -x`` (not installed). The shim (``hal_shim.c``, ours)
 is compiled with the system C compiler into the same cache, once per source version.
+
+``rs274`` (:func:`provision_rs274`) comes from the same package: the binary and the
+package's own libraries are kept in ``rs274-<version>/`` in the cache; a system library it
+needs that is not installed (Debian 12: ``libboost_python311``, from
+``libboost-python1.74.0``) is downloaded and unpacked there too, chosen among the package's
+dependencies. It runs with ``LD_LIBRARY_PATH`` on that directory (:meth:`Rs274.environ`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import os
+import re
 import shutil
 import subprocess
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,9 +31,12 @@ __all__ = [
     "PACKAGE",
     "PlasmacUnavailable",
     "Provisioned",
+    "Rs274",
     "build_shim",
     "find_component",
+    "find_rs274",
     "provision",
+    "provision_rs274",
 ]
 
 PACKAGE = "linuxcnc-uspace"
@@ -62,22 +75,22 @@ def _run(cmd: list[str], cwd: Path | None = None) -> subprocess.CompletedProcess
     )
 
 
-def _download(cache: Path) -> Path:
-    """``apt-get download linuxcnc-uspace`` into ``cache`` (``apt-get update`` once if apt
-    does not know the package)."""
+def _download(cache: Path, package: str = PACKAGE) -> Path:
+    """``apt-get download <package>`` into ``cache`` (``apt-get update`` once if apt does not
+    know the package)."""
     if shutil.which("apt-get") is None:
-        raise PlasmacUnavailable("apt-get not found: cannot fetch linuxcnc-uspace")
+        raise PlasmacUnavailable(f"apt-get not found: cannot fetch {package}")
     cache.mkdir(parents=True, exist_ok=True)
     # As root, apt's sandbox user must be able to write here; a private dir avoids it.
-    result = _run(["apt-get", "-o", "APT::Sandbox::User=root", "download", PACKAGE], cache)
+    result = _run(["apt-get", "-o", "APT::Sandbox::User=root", "download", package], cache)
     if result.returncode != 0 and os.geteuid() == 0:
         _run(["apt-get", "update"])
-        result = _run(["apt-get", "-o", "APT::Sandbox::User=root", "download", PACKAGE], cache)
-    debs = sorted(glob.glob(str(cache / f"{PACKAGE}_*.deb")))
+        result = _run(["apt-get", "-o", "APT::Sandbox::User=root", "download", package], cache)
+    debs = sorted(glob.glob(str(cache / f"{package}_*.deb")))
     if result.returncode != 0 or not debs:
         reason = (result.stderr or result.stdout).strip().splitlines()
         raise PlasmacUnavailable(
-            f"apt-get download {PACKAGE} failed: {reason[-1] if reason else 'no package'}"
+            f"apt-get download {package} failed: {reason[-1] if reason else 'no package'}"
         )
     return Path(debs[-1])
 
@@ -143,3 +156,141 @@ def provision(
         fetched = True
     component, version = found
     return Provisioned(component, build_shim(cache), version, fetched)
+
+
+# --------------------------------------------------------------------------- rs274
+
+RS274_PATH = "usr/bin/rs274"
+_PACKAGE_LIBS = "usr/lib"  # the package's own libraries: librs274, libnml, libtooldata, ...
+_RS274_TIMEOUT_S = 60.0
+
+
+@dataclass(frozen=True)
+class Rs274:
+    """LinuxCNC's standalone interpreter, unpacked: ``binary`` runs with ``lib`` first on
+    ``LD_LIBRARY_PATH``."""
+
+    binary: Path
+    lib: Path
+    version: str  # the Debian package version it came from
+    fetched: bool  # downloaded by this call
+
+    def environ(self, base: dict[str, str] | None = None) -> dict[str, str]:
+        env = dict(os.environ if base is None else base)
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(
+            p for p in (str(self.lib), env.get("LD_LIBRARY_PATH", "")) if p
+        )
+        return env
+
+    def run(
+        self, program: Path, *, tool_table: Path, var_file: Path,
+        timeout_s: float = _RS274_TIMEOUT_S,
+    ) -> subprocess.CompletedProcess[str]:  # fmt: skip
+        """``rs274 -t tool_table -v var_file -g program``: the canonical calls on stdout, one
+        per line (``STRAIGHT_TRAVERSE(...)``, ``ARC_FEED(...)``, ...), in the program's units;
+        errors on stderr (and a nonzero status)."""
+        cmd = [str(self.binary), "-t", str(tool_table), "-v", str(var_file), "-g", str(program)]
+        return subprocess.run(  # noqa: S603 - the unpacked rs274, fixed arguments
+            cmd, capture_output=True, text=True, env=self.environ(), stdin=subprocess.DEVNULL,
+            timeout=timeout_s, check=False,
+        )  # fmt: skip
+
+
+def find_rs274(cache: Path = DEFAULT_CACHE) -> Rs274 | None:
+    """An already unpacked ``rs274`` in ``cache``."""
+    for root in sorted(cache.glob("rs274-*")):
+        binary = root / "bin" / "rs274"
+        if binary.is_file():
+            return Rs274(binary, root / "lib", root.name.removeprefix("rs274-"), False)
+    return None
+
+
+def _missing_libraries(binary: Path, lib: Path) -> list[str]:
+    """The shared libraries ``ldd`` cannot find for ``binary`` with ``lib`` on the path."""
+    env = dict(os.environ, LD_LIBRARY_PATH=str(lib))
+    result = subprocess.run(  # noqa: S603 - ldd from the system's libc, fixed arguments
+        ["ldd", str(binary)], capture_output=True, text=True, env=env,  # noqa: S607 - ldd
+        timeout=_APT_TIMEOUT_S, check=False,
+    )  # fmt: skip
+    return re.findall(r"^\s*(\S+) => not found", result.stdout, re.MULTILINE)
+
+
+def _providers(missing: Sequence[str], depends: str) -> list[str]:
+    """The packages among ``depends`` (a ``Depends`` field) that provide the ``missing``
+    libraries, by Debian's naming (``libboost_python311.so.1.74.0`` → the shortest
+    dependency named ``libboost-python*``: ``libboost-python1.74.0``)."""
+    names = [
+        re.split(r"[\s(:]", part.strip(), maxsplit=1)[0] for part in re.split(r"[,|]", depends)
+    ]
+    chosen: list[str] = []
+    for soname in missing:
+        stem = re.sub(r"[\d.]+$", "", soname.split(".so")[0]).replace("_", "-")
+        candidates = sorted((n for n in names if n.startswith(stem)), key=len)
+        if not candidates:
+            raise PlasmacUnavailable(f"rs274 needs {soname}: no {PACKAGE} dependency provides it")
+        if candidates[0] not in chosen:
+            chosen.append(candidates[0])
+    return chosen
+
+
+def _unpack_rs274(work: Path, note: object) -> tuple[Path, str]:
+    """Download and unpack into ``work``: the package's rs274 and libraries, then what the
+    system lacks. Returns the finished directory (``work/rs274``) and the version."""
+    deb = _download(work)
+    version = deb.name.removeprefix(f"{PACKAGE}_").rsplit("_", 1)[0]
+    tree = work / "tree"
+    result = _run(["dpkg-deb", "-x", str(deb), str(tree)])
+    if result.returncode != 0 or not (tree / RS274_PATH).is_file():
+        raise PlasmacUnavailable(f"dpkg-deb -x {deb.name}: {result.stderr.strip() or 'no rs274'}")
+    out = work / "rs274"
+    (out / "bin").mkdir(parents=True)
+    (out / "lib").mkdir()
+    shutil.copy2(tree / RS274_PATH, out / "bin" / "rs274")
+    for so in (tree / _PACKAGE_LIBS).glob("lib*.so*"):
+        shutil.copy2(so, out / "lib" / so.name)
+    copyright_file = tree / "usr/share/doc" / PACKAGE / "copyright"
+    if copyright_file.is_file():
+        shutil.copy2(copyright_file, out / "copyright")
+    missing = _missing_libraries(out / "bin" / "rs274", out / "lib")
+    if missing:
+        depends = _run(["dpkg-deb", "-f", str(deb), "Depends"]).stdout
+        for package in _providers(missing, depends):
+            if callable(note):
+                note(f"fetching {package} (rs274 needs it) with apt-get download")
+            lib_deb = _download(work / package, package)
+            lib_tree = work / package / "tree"
+            _run(["dpkg-deb", "-x", str(lib_deb), str(lib_tree)])
+            for so in lib_tree.glob("usr/lib/**/*.so*"):
+                if so.is_file():
+                    shutil.copy2(so, out / "lib" / so.name)
+        still = _missing_libraries(out / "bin" / "rs274", out / "lib")
+        if still:
+            raise PlasmacUnavailable(f"rs274 still lacks {', '.join(still)}")
+    return out, version
+
+
+def provision_rs274(
+    cache: Path = DEFAULT_CACHE, *, fetch: bool = True, note: object = None
+) -> Rs274:
+    """``rs274`` from the cache, fetched through apt (``linuxcnc-uspace`` and any library
+    the system lacks, unpacked, not installed) when missing and ``fetch``. Parallel callers
+    each unpack privately; the first to finish publishes ``rs274-<version>``."""
+    found = find_rs274(cache)
+    if found is not None:
+        return found
+    if not fetch:
+        raise PlasmacUnavailable(f"rs274 not in {cache} (fetching disabled)")
+    if callable(note):
+        note(f"fetching {PACKAGE} with apt-get download into {cache} for rs274 (not installed)")
+    work = cache / f".rs274-{os.getpid()}"
+    shutil.rmtree(work, ignore_errors=True)
+    try:
+        out, version = _unpack_rs274(work, note)
+        with contextlib.suppress(OSError):  # atomic; another caller may have won
+            out.rename(cache / f"rs274-{version}")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    found = find_rs274(cache)
+    if found is None:
+        raise PlasmacUnavailable(f"rs274 could not be unpacked into {cache}")
+    return Rs274(found.binary, found.lib, found.version, True)
