@@ -241,7 +241,9 @@ static void cmd_z_move(uint8_t seq, const uint8_t *p)
     }
 }
 
-static void cmd_z_probe(uint8_t seq, const uint8_t *p)
+/* Z_PROBE (down until a sensor is active) and Z_PROBE_AWAY (up until every sensor is
+ * released): one payload, one set of refusals (PROTOCOL.md section 6.1). */
+static void cmd_z_probe(uint8_t seq, const uint8_t *p, bool away)
 {
     uint32_t feed = dthc_get_u32(p);
     uint32_t travel = dthc_get_u32(p + 4);
@@ -256,7 +258,7 @@ static void cmd_z_probe(uint8_t seq, const uint8_t *p)
         reply(seq, DTHC_NAK_OUT_OF_RANGE, 2);
     } else {
         reply(seq, 0, 0);
-        board_z_probe(seq, feed, travel, sensors);
+        board_z_probe(seq, feed, travel, sensors, away);
     }
 }
 
@@ -324,7 +326,10 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         cmd_z_move(seq, p);
         break;
     case DTHC_MSG_Z_PROBE:
-        cmd_z_probe(seq, p);
+        cmd_z_probe(seq, p, false);
+        break;
+    case DTHC_MSG_Z_PROBE_AWAY:
+        cmd_z_probe(seq, p, true);
         break;
     case DTHC_MSG_Z_STOP:
         board_z_end(DTHC_MOTION_STOPPED, DTHC_PROBE_ABORTED);

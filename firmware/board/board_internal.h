@@ -116,13 +116,14 @@ typedef struct {
     int32_t z_target_um;    /* Z_MOVE target */
     int32_t z_feed_um_s;    /* Z_MOVE / Z_PROBE feed, Z_VELOCITY velocity */
     uint8_t move_seq;       /* running Z_MOVE's seq, 0 for none */
-    uint8_t probe_seq;      /* running Z_PROBE's seq, 0 for none */
+    uint8_t probe_seq;      /* running Z_PROBE's (Z_PROBE_AWAY's) seq, 0 for none */
+    bool probe_away;        /* Z_PROBE_AWAY: up until every sensor is released */
     uint16_t probe_sensors;
     int32_t probe_end_um;
     bool probe_to_limit;    /* the probe's end is the soft limit, not max travel */
     uint8_t probe_outcome;  /* BOARD_NO_OUTCOME while running */
-    uint16_t probe_fired;
-    int32_t probe_contact_um;
+    uint16_t probe_fired;   /* the sensors that fired; away: the ones last seen active */
+    int32_t probe_contact_um; /* where contact (away: the release) was detected */
     uint16_t zvel_seq;
     bool zvel_applied;
     uint32_t zvel_expiry_us;
@@ -159,7 +160,8 @@ bool board_z_busy(void);
 void board_z_end(uint8_t move_result, uint8_t probe_result);
 void board_z_stop(void);
 void board_z_move(uint8_t seq, int32_t target_um, uint32_t feed_um_s);
-void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint16_t sensors);
+void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint16_t sensors,
+                   bool away);
 void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms);
 void board_send_motion_done(void);
 void board_send_probe_result(void);

@@ -1,5 +1,6 @@
 /*
- * board_motion.c - Z: trapezoidal Z_MOVE, Z_PROBE with its stop on contact, Z_VELOCITY
+ * board_motion.c - Z: trapezoidal Z_MOVE, Z_PROBE with its stop on contact (Z_PROBE_AWAY:
+ * up, stopped on the release of every sensor of its set), Z_VELOCITY
  * with expiry, Z_STOP, soft limits. Runs once per tick: the velocity ramps towards what
  * the mode wants by at most the acceleration limit per tick, and the step generator gets
  * bounds it never steps past (a move's target, a probe's end, the soft limits, an active
@@ -137,7 +138,10 @@ static void probe_done(int32_t z_um)
     B.last_probe.seq = B.probe_seq;
     B.last_probe.result = B.probe_outcome;
     B.last_probe.sensor = B.probe_fired;
-    B.last_probe.contact_z_um = B.probe_outcome == DTHC_PROBE_CONTACT ? B.probe_contact_um : z_um;
+    B.last_probe.contact_z_um =
+        B.probe_outcome == (B.probe_away ? DTHC_PROBE_RELEASED : DTHC_PROBE_CONTACT)
+            ? B.probe_contact_um
+            : z_um;
     B.last_probe.stop_z_um = z_um;
     B.last_probe.t_us = hal_time_us();
     B.probe_seq = 0;
@@ -179,7 +183,8 @@ void board_z_move(uint8_t seq, int32_t target_um, uint32_t feed_um_s)
     B.move_seq = seq;
 }
 
-void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint16_t sensors)
+void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint16_t sensors,
+                   bool away)
 {
     int32_t z = board_z_um();
     int32_t travel = max_travel_um > 0x20000000UL ? 0x20000000L : (int32_t)max_travel_um;
@@ -188,17 +193,18 @@ void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint
     B.z_feed_um_s = feed_um_s > (uint32_t)B.cfg->z_max_speed_um_s ? B.cfg->z_max_speed_um_s
                                                                   : (int32_t)feed_um_s;
     B.probe_seq = seq;
+    B.probe_away = away;
     B.probe_sensors = sensors;
-    B.probe_end_um = z - travel;
-    B.probe_to_limit = B.probe_end_um < B.cfg->z_min_um;
+    B.probe_end_um = away ? z + travel : z - travel;
+    B.probe_to_limit = away ? B.probe_end_um > B.cfg->z_max_um : B.probe_end_um < B.cfg->z_min_um;
     if (B.probe_to_limit) {
-        B.probe_end_um = B.cfg->z_min_um;
+        B.probe_end_um = away ? B.cfg->z_max_um : B.cfg->z_min_um;
     }
     target_steps = steps_of(B.probe_end_um);
     B.probe_fired = (uint16_t)(B.inputs & sensors);
     B.probe_outcome = BOARD_NO_OUTCOME;
-    if (B.probe_fired) { /* already in contact: zero travel */
-        B.probe_outcome = DTHC_PROBE_CONTACT;
+    if ((B.probe_fired != 0) != away) { /* already in contact (away: released): zero travel */
+        B.probe_outcome = away ? DTHC_PROBE_RELEASED : DTHC_PROBE_CONTACT;
         B.probe_contact_um = z;
     }
 }
@@ -270,26 +276,43 @@ void board_z_tick(void)
         }
         break;
     }
-    case Z_PROBE:
+    case Z_PROBE: {
+        /* Down until a sensor of the set is active (Z_PROBE), or up until every one is
+         * released (Z_PROBE_AWAY): the same rules either way. */
+        bool away = B.probe_away;
+        int32_t to_end = away ? B.probe_end_um - z : z - B.probe_end_um;
         if (B.probe_outcome == BOARD_NO_OUTCOME) {
-            uint16_t fired = (uint16_t)(B.inputs & B.probe_sensors);
-            if (fired) {
-                /* The stop on contact: decided here, in the tick that read the input. */
-                B.probe_outcome = DTHC_PROBE_CONTACT;
-                B.probe_fired = fired;
+            uint16_t active = (uint16_t)(B.inputs & B.probe_sensors);
+            if (active) {
+                B.probe_fired = active; /* away: the last seen active, the last to let go */
+            }
+            if ((active != 0) != away) {
+                /* The stop on contact (on the release): decided here, in the tick that
+                 * read the input. */
+                B.probe_outcome = away ? DTHC_PROBE_RELEASED : DTHC_PROBE_CONTACT;
                 B.probe_contact_um = z;
-            } else if (z <= B.probe_end_um) {
-                B.probe_outcome = B.probe_to_limit ? DTHC_PROBE_LIMIT : DTHC_PROBE_NO_CONTACT;
+            } else if (to_end <= 0) {
+                B.probe_outcome = B.probe_to_limit ? DTHC_PROBE_LIMIT
+                                  : away           ? DTHC_PROBE_NO_RELEASE
+                                                   : DTHC_PROBE_NO_CONTACT;
             }
         }
-        lo = target_steps;
+        if (away) {
+            hi = target_steps;
+        } else {
+            lo = target_steps;
+        }
         if (B.probe_outcome == BOARD_NO_OUTCOME) {
-            want = -approach_um_s(z - B.probe_end_um, B.z_feed_um_s);
+            want = approach_um_s(to_end, B.z_feed_um_s);
+            if (!away) {
+                want = -want;
+            }
         } else if (v == 0) {
             B.z_mode = Z_IDLE;
             probe_done(z);
         }
         break;
+    }
     case Z_VELOCITY:
         if ((int32_t)(B.now_us - B.zvel_expiry_us) >= 0) {
             B.z_mode = Z_STOPPING; /* no newer Z_VELOCITY in time */

@@ -173,6 +173,15 @@ static uint8_t z_probe(uint32_t feed, uint32_t travel, uint16_t sensors)
     return send(DTHC_MSG_Z_PROBE, p, 10);
 }
 
+static uint8_t z_probe_away(uint32_t feed, uint32_t travel, uint16_t sensors)
+{
+    uint8_t p[10];
+    dthc_put_u32(p, feed);
+    dthc_put_u32(p + 4, travel);
+    dthc_put_u16(p + 8, sensors);
+    return send(DTHC_MSG_Z_PROBE_AWAY, p, 10);
+}
+
 static void z_velocity(uint16_t stream_seq, int32_t v, uint16_t expiry_ms)
 {
     uint8_t p[8];
@@ -402,7 +411,7 @@ static int test_idle_lease_lapse_reported_again_after_renewal(void)
 static int test_lease_latches_when_not_at_rest(void)
 {
     int c;
-    for (c = 0; c < 5; c++) {
+    for (c = 0; c < 6; c++) {
         unsigned mark;
         const frame_t *f;
         uint16_t lease = 100;
@@ -417,6 +426,10 @@ static int test_lease_latches_when_not_at_rest(void)
             z_velocity(1, 5000, 200);
         } else if (c == 3) {
             cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+        } else if (c == 5) {
+            F.inputs = IN(FLOAT); /* on the float switch: a probe away lifts off it */
+            run_ms(1);
+            z_probe_away(500, 30000, IN(FLOAT));
         } else {
             z_move(80000, 60000);
             run_ms(60);
@@ -435,7 +448,7 @@ static int test_lease_latches_when_not_at_rest(void)
                       && last(DTHC_MSG_MOTION_DONE, -1, mark)->p[0] == DTHC_MOTION_FAULT,
                   "the move must end with MOTION_DONE FAULT");
         }
-        if (c == 1) {
+        if (c == 1 || c == 5) {
             CHECK(last(DTHC_MSG_PROBE_RESULT, -1, mark)
                       && last(DTHC_MSG_PROBE_RESULT, -1, mark)->p[0] == DTHC_PROBE_ABORTED,
                   "the probe must end with PROBE_RESULT ABORTED");
@@ -601,6 +614,109 @@ static int test_probe_no_contact_and_limit(void)
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
     CHECK(r && r->p[0] == DTHC_PROBE_LIMIT, "no LIMIT result");
     CHECK(dthc_get_i32(r->p + 7) == 0, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    return 0;
+}
+
+/* Z_PROBE_AWAY (1.2): up until every sensor of the set is released, stopped in the tick
+ * that reads the last release, which it latches; RELEASED with that position and the rest
+ * position above it by the overrun; the sensor that let go last. */
+static int test_probe_away_stops_on_release_in_tick(void)
+{
+    uint8_t seq;
+    unsigned mark;
+    const frame_t *r;
+    int32_t released, stop;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
+    F.inputs = IN(OHMIC) | IN(FLOAT);
+    run_ms(1);
+    seq = z_probe_away(5000, 20000, IN(OHMIC) | IN(FLOAT));
+    CHECK(is_ack(seq, 0), "probe away not acknowledged");
+    run_ms(300);
+    CHECK(F.rate > 0, "probe away not moving up (rate %d)", (int)F.rate);
+    F.inputs = IN(OHMIC); /* one of two released: not yet */
+    run_ms(200);
+    CHECK(F.rate > 0, "stopped with a sensor still active");
+    CHECK(!last(DTHC_MSG_PROBE_RESULT, seq, 0), "PROBE_RESULT with a sensor still active");
+    mark = n_out;
+    F.inputs = 0;
+    fake_run_us(F.next_tick_us - (uint32_t)F.now_us); /* exactly one tick */
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(F.rate < 5000 * 200 / 1000, "no deceleration in the release tick (rate %d)",
+          (int)F.rate);
+    run_ms(50);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, mark);
+    CHECK(r, "no PROBE_RESULT");
+    released = dthc_get_i32(r->p + 3);
+    stop = dthc_get_i32(r->p + 7);
+    CHECK(r->p[0] == DTHC_PROBE_RELEASED, "result %u", r->p[0]);
+    CHECK(dthc_get_u16(r->p + 1) == IN(OHMIC), "sensor 0x%04x", dthc_get_u16(r->p + 1));
+    CHECK(released >= 60000 + 2400 && released <= 60000 + 2600, "released at %d",
+          (int)released);
+    CHECK(stop >= released && stop <= released + 50, "stop %d vs release %d", (int)stop,
+          (int)released);
+    CHECK(F.rate == 0, "still moving after the result");
+    CHECK(!(status_bits() & DTHC_STATUS_Z_BUSY), "Z busy after the result");
+    return 0;
+}
+
+/* Z_PROBE_AWAY: NO_RELEASE at the travel's end, LIMIT at Z max, RELEASED at once when
+ * nothing is active, ABORTED by Z_STOP; Z_PROBE's refusals (feed, travel, sensors, a
+ * latched fault). */
+static int test_probe_away_no_release_limit_and_refusals(void)
+{
+    uint8_t seq, detail = 0xEE;
+    const frame_t *r;
+    int32_t z;
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    F.inputs = IN(FLOAT);
+    run_ms(1);
+    seq = z_probe_away(20000, 3000, IN(FLOAT));
+    run_ms(600);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_NO_RELEASE, "no NO_RELEASE (%d)", r ? r->p[0] : -1);
+    CHECK(dthc_get_u16(r->p + 1) == IN(FLOAT), "sensor 0x%04x", dthc_get_u16(r->p + 1));
+    CHECK(dthc_get_i32(r->p + 7) == 63000, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    CHECK(dthc_get_i32(r->p + 3) == 63000, "contact at %d", (int)dthc_get_i32(r->p + 3));
+    seq = z_probe_away(60000, 90000, IN(FLOAT));
+    run_ms(2000);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_LIMIT, "no LIMIT result");
+    CHECK(dthc_get_i32(r->p + 7) == 100000, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    CHECK(!faults(), "a probe away at the soft limit latched 0x%04x", faults());
+    z_move(80000, 60000);
+    run_ms(1000);
+    F.inputs = 0;
+    run_ms(1);
+    z = z_um();
+    seq = z_probe_away(5000, 3000, IN(FLOAT) | IN(OHMIC));
+    run_ms(5);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_RELEASED, "not RELEASED at once");
+    CHECK(dthc_get_u16(r->p + 1) == 0, "sensor 0x%04x", dthc_get_u16(r->p + 1));
+    CHECK(dthc_get_i32(r->p + 3) == z && dthc_get_i32(r->p + 7) == z, "moved");
+    F.inputs = IN(FLOAT);
+    run_ms(1);
+    seq = z_probe_away(5000, 3000, IN(FLOAT));
+    run_ms(100);
+    send(DTHC_MSG_Z_STOP, NULL, 0);
+    run_ms(50);
+    r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
+    CHECK(r && r->p[0] == DTHC_PROBE_ABORTED, "Z_STOP did not abort the probe away");
+    CHECK(nak_code(z_probe_away(0, 3000, IN(FLOAT)), 0, &detail) == DTHC_NAK_OUT_OF_RANGE
+              && detail == 0, "feed 0 accepted");
+    CHECK(nak_code(z_probe_away(5000, 0, IN(FLOAT)), 0, &detail) == DTHC_NAK_OUT_OF_RANGE
+              && detail == 1, "travel 0 accepted");
+    CHECK(nak_code(z_probe_away(5000, 3000, IN(ARC_OK)), 0, &detail) == DTHC_NAK_OUT_OF_RANGE
+              && detail == 2, "no contact sensor accepted");
+    F.inputs = IN(FLOAT) | IN(ESTOP);
+    run_ms(1);
+    CHECK(nak_code(z_probe_away(5000, 3000, IN(FLOAT)), 0, &detail) == DTHC_NAK_FAULT_LATCHED
+              && detail == DTHC_FAULT_ESTOP, "accepted with a fault latched");
     return 0;
 }
 
@@ -1130,6 +1246,8 @@ static const struct {
     T(hello_info_fields),
     T(probe_stops_on_contact_in_tick),
     T(probe_no_contact_and_limit),
+    T(probe_away_stops_on_release_in_tick),
+    T(probe_away_no_release_limit_and_refusals),
     T(z_velocity_stale_ignored_and_expiry),
     T(soft_limit_latches_z_limit),
     T(move_limits_and_upward_only),
