@@ -134,8 +134,11 @@ class ControllerSettings(_Closed):
     thc: ThcSettings = ThcSettings()
     # The dialect of G-code lines whose request names none (dthc_bridge.controller.dialect).
     dialect: Literal["masso", "plasmac", "rosetta", "relay"] = "masso"
-    # Start in plasma mode, for posts that never send T112 M6 (MASSO's Fusion 360 post).
-    plasma_mode_at_start: bool = False
+    # A plasma-only table: M3 lights the torch with no tool change first (most posts send
+    # none), and a tool change is a note that never leaves plasma mode. False: a table whose
+    # sender drives other tools too (a MASSO router with a plasma head): T112 M6 (PlasmaC
+    # T0 M6) enters plasma mode and any other tool leaves it.
+    plasma_mode_at_start: bool = True
     # The material library (QtPlasmaC format), written crash-safe on every change; None:
     # no library (material 0, the default, only; material_set is refused).
     materials_file: Path | None = None

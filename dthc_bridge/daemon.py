@@ -64,6 +64,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
 
     settings = config.controller
     controller = build_controller(settings.configs())
+    controller.plasma_only = settings.plasma_mode_at_start
     controller.sequence.plasma_mode = settings.plasma_mode_at_start
     controller.default_material = default_material(settings.default_cut_feed_mm_min)
     controller.inch_materials = settings.materials_in_inches

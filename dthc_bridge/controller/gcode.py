@@ -307,11 +307,9 @@ def _m6(words: Sequence[Word], ctx: _Context) -> Command:
     if tool < 0:
         raise CommandError(p.name("T"), f"{tool} is not a tool number")
     if ctx.dialect is Dialect.PLASMAC:
-        if tool in _TOOLS_NOT_HERE:
-            raise CommandError(
-                f"T{tool} M6", f"tool {tool} is {_TOOLS_NOT_HERE[tool]}: not on this board"
-            )
-        return PlasmaMode(tool, torch=tool == 0)
+        # PlasmaC selects its scribe and spotting torch with M3 $1 / $2 (refused there): a
+        # T<n> M6 is a tool number (a 2008 SheetCam post's T1 is its plasma tool).
+        return PlasmaMode(tool, torch=True)
     return PlasmaMode(tool)
 
 

@@ -48,7 +48,12 @@ from .commands import (
 )
 from .sequence import CutSequence, State
 
-__all__ = ["Outcome", "PlasmaController", "ResumeTrack"]
+__all__ = ["TOOL_NOTE", "Outcome", "PlasmaController", "ResumeTrack"]
+
+TOOL_NOTE = (
+    "a tool note: plasma mode stays on (controller.plasma_mode_at_start; a table with other "
+    "tools sets it false)"
+)
 
 
 @dataclass(frozen=True)
@@ -89,8 +94,13 @@ class PlasmaController:
         materials: Mapping[int, Material] | None = None,
         default: Material | None = None,
         inch_materials: bool = False,
+        plasma_only: bool = False,
     ) -> None:
         self.sequence = sequence or CutSequence()
+        # controller.plasma_mode_at_start: in plasma mode from the start, and a tool change
+        # is a note (the torch is the only tool this board starts).
+        self.plasma_only = plasma_only
+        self.sequence.plasma_mode = self.sequence.plasma_mode or plasma_only
         self.resume_points: list[ResumeTrack] = []
         self.default_material = default or default_material(3000.0)
         self.inch_materials = inch_materials  # the library's lengths are inches
@@ -208,6 +218,8 @@ class PlasmaController:
         if isinstance(command, ProbeAndStart):
             return self._probe_and_start(command, now, xy_mm)
         if isinstance(command, PlasmaMode):
+            if self.plasma_only and not command.enabled:
+                return Outcome(data={"tool": command.tool, "note": TOOL_NOTE})
             if sequence.busy and not command.enabled:
                 raise CommandError(f"T{command.tool} M6", "cannot leave plasma mode during a cut")
             sequence.plasma_mode = command.enabled

@@ -33,10 +33,10 @@ from ..controller.commands import (
 from ..controller.dialect import Dialect
 from ..controller.gcode import parse_line
 from ..controller.plasma import PlasmaController, default_material
-from ..controller.words import cutting_feed_mm_min
+from ..controller.words import cutting_feed_mm_min, tokenize
 from ..materials import Material, MaterialError, MaterialStore
 from .options import add_daemon_options, add_dialect_options
-from .plan import DaemonStep, DwellStep, ProgramPlan, Refused, detect_dialect
+from .plan import DaemonStep, DwellStep, MotionStep, ProgramPlan, Refused, detect_dialect
 from .xypath import PathTracer, path_entries
 
 __all__ = ["CheckReport", "CutReport", "add_arguments", "check_program", "run_from_args"]
@@ -63,6 +63,7 @@ class CutReport:
 class CheckReport:
     dialect: str
     dialect_reason: str
+    plasma_mode_at_start: bool = True
     cuts: list[CutReport] = field(default_factory=list)
     refused: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -80,6 +81,7 @@ class CheckReport:
             "ok": self.ok,
             "dialect": self.dialect,
             "dialect_reason": self.dialect_reason,
+            "plasma_mode_at_start": self.plasma_mode_at_start,
             "cuts": [asdict(cut) for cut in self.cuts],
             "refused": self.refused,
             "warnings": self.warnings,
@@ -161,8 +163,9 @@ class _Model:
             tool = "T0 M6" if self.plan.dialect is Dialect.PLASMAC else "T112 M6"
             raise CommandError(
                 "M3",
-                f"not in plasma mode: the program needs {tool} before it, or the daemon "
-                "configured to start in plasma mode (--plasma-mode-at-start)",
+                f"not in plasma mode: the program needs {tool} before it (plasma mode at "
+                "start is off: controller.plasma_mode_at_start = false, a table with other "
+                "tools; --plasma-mode-at-start checks as a plasma-only table)",
             )
         if self.open_cut is not None:
             raise CommandError("M3", f"a cut is already running (from line {self.open_cut.line})")
@@ -214,7 +217,7 @@ def check_program(
     materials: Mapping[int, Material] | None = None,
     inch_materials: bool = False,
     default_feed_mm_min: float = 3000.0,
-    plasma_mode_at_start: bool = False,
+    plasma_mode_at_start: bool = True,
     fallback_dialect: Dialect | None = None,
 ) -> CheckReport:
     """Plan ``lines`` as the sender would and apply them to a board-less controller.
@@ -228,19 +231,25 @@ def check_program(
         dialect, why = detect_dialect(lines, fallback)
     else:
         why = "given"
-    report = CheckReport(str(dialect), why)
+    report = CheckReport(str(dialect), why, plasma_mode_at_start=plasma_mode_at_start)
     plan = ProgramPlan(lines, dialect, dict(codes or {}))
     controller = PlasmaController(
         materials=materials or {},
         default=default_material(default_feed_mm_min),
         inch_materials=inch_materials,
+        plasma_only=plasma_mode_at_start,
     )
     controller.sequence.plasma_mode = plasma_mode_at_start
     plan.cut_feed_mm_min = controller.begin_program()["cut_feed_mm_min"]
     model = _Model(plan, controller)
+    motion_m: dict[float, tuple[int, str]] = {}  # M codes sent to motion: first line of each
     tracer = PathTracer(plan)
     for index, step in enumerate(plan.steps()):
         tracer.step(index, step)
+        if isinstance(step, MotionStep):
+            for word in tokenize(step.line).words:
+                if word.letter == "M":
+                    motion_m.setdefault(word.value, (step.source_line, step.line))
         if isinstance(step, Refused):
             report.refuse(step.source_line, step.text, step.error)
             continue
@@ -252,6 +261,8 @@ def check_program(
             model.apply(step, report)
         except CommandError as exc:
             report.refuse(step.source_line, step.text, str(exc))
+    if not report.cuts and not report.refused:
+        _unknown_m_codes(motion_m, report)
     if not report.cuts and not report.refused:
         report.warnings.append(
             f"no cut found: no torch start ({_STARTS[Dialect(report.dialect)]}) in the "
@@ -266,6 +277,30 @@ def check_program(
     report.warnings.extend(plan.warnings)
     report.path = path_entries(tracer.segments)
     return report
+
+
+# M codes a motion controller runs itself (RS274NGC, LinuxCNC's user M100-M199): program
+# flow, tool change, coolant, overrides, modal state.
+MOTION_M_CODES = frozenset(
+    {0.0, 1.0, 2.0, 30.0, 60.0, 6.0, 7.0, 8.0, 9.0, 4.0, 48.0, 49.0, 50.0, 51.0, 52.0, 53.0,
+     61.0, 70.0, 71.0, 72.0, 73.0, *(float(n) for n in range(100, 200))}
+)  # fmt: skip
+
+
+def _unknown_m_codes(codes: Mapping[float, tuple[int, str]], report: CheckReport) -> None:
+    """A program without a cut whose M codes neither the daemon nor a motion controller
+    knows (a shop's SheetCam post switching the torch with M13/M15): not OK. Each is refused
+    at its first line, with the --code mapping that would make it a torch start and stop."""
+    unknown = [(f"M{code:g}", where) for code, where in codes.items()
+               if code not in MOTION_M_CODES]  # fmt: skip
+    if not unknown:
+        return
+    names = [name for name, _ in unknown]
+    hint = (f"--code {names[0]}=M3 --code {names[1]}=M5" if len(names) >= 2
+            else f"--code {names[0]}=M3")  # fmt: skip
+    for name, (line, text) in unknown:
+        report.refuse(line, text, f"{name}: not a code the daemon knows, and the program has "
+                      f"no cut: if these switch the torch, map them ({hint})")  # fmt: skip
 
 
 # --------------------------------------------------------------------------- command line
@@ -284,7 +319,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _text(report: CheckReport, path: Path) -> str:
-    out = [f"{path}: dialect {report.dialect} ({report.dialect_reason})"]
+    mode = ("on (a plasma-only table: M3 needs no tool change)" if report.plasma_mode_at_start
+            else "off (T112 M6 / T0 M6 before M3: a table with other tools)")  # fmt: skip
+    out = [f"{path}: dialect {report.dialect} ({report.dialect_reason}); plasma mode at "
+           f"start {mode}"]  # fmt: skip
     for number, cut in enumerate(report.cuts, start=1):
         source = {
             "material": f"material {cut.material} {cut.material_name!r}",
@@ -323,7 +361,8 @@ def run_from_args(args: argparse.Namespace) -> int:
         codes={**(daemon.codes if daemon else {}), **args.codes},
         inch_materials=args.inch_materials or bool(daemon and daemon.materials_in_inches),
         plasma_mode_at_start=(
-            args.plasma_mode_at_start or bool(daemon and daemon.plasma_mode_at_start)
+            args.plasma_mode_at_start if args.plasma_mode_at_start is not None
+            else daemon.plasma_mode_at_start if daemon else True
         ),
         default_feed_mm_min=daemon.default_cut_feed_mm_min if daemon else 3000.0,
         fallback_dialect=Dialect(daemon.dialect) if daemon else None,

@@ -65,6 +65,7 @@ def add_daemon_options(parser: argparse.ArgumentParser) -> None:
         "--inch-materials", action="store_true", help="the material file's lengths are inches"
     )
     parser.add_argument(
-        "--plasma-mode-at-start", action="store_true",
-        help="as the daemon configured to start in plasma mode (posts without T112 M6)",
+        "--plasma-mode-at-start", action=argparse.BooleanOptionalAction, default=None,
+        help="as the daemon's controller.plasma_mode_at_start (default: on, a plasma-only "
+        "table; --no-plasma-mode-at-start: a table with other tools, T112 M6 / T0 M6 first)",
     )  # fmt: skip

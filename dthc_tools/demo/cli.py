@@ -51,5 +51,6 @@ def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge demo") -
         as_json=args.json, program=args.program, plot=args.plot, broker=args.broker,
         scenario=args.scenario, materials=args.materials, dialect=args.dialect, codes=args.codes,
         controller={"materials_in_inches": args.inch_materials,
-                    "plasma_mode_at_start": args.plasma_mode_at_start},
+                    **({} if args.plasma_mode_at_start is None
+                       else {"plasma_mode_at_start": args.plasma_mode_at_start})},
     )  # fmt: skip

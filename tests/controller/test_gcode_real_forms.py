@@ -108,10 +108,13 @@ def test_t0_m6_outside_plasmac_is_an_ordinary_tool_change() -> None:
 
 
 @pytest.mark.parametrize(("tool", "names"), [(1, "scribe"), (2, "spotting torch")])
-def test_plasmac_scribe_and_spotting_tools_are_refused(tool: int, names: str) -> None:
-    err = error(f"T{tool} M6")
-    assert err.word == f"T{tool} M6"
+def test_plasmac_scribe_and_spotting_tools_are_refused_at_their_m3(tool: int, names: str) -> None:
+    """PlasmaC selects them with M3 $1 / $2; a T1 M6 is a tool number (SheetCam's plasma
+    tool), not the scribe."""
+    err = error(f"M3 ${tool} S1")
+    assert err.word == f"M3 ${tool}"
     assert names in err.reason
+    assert commands(f"T{tool} M6") == (PlasmaMode(tool, torch=True),)
 
 
 def test_g43_h0_passes_to_motion() -> None:

@@ -131,10 +131,34 @@ def test_an_ngc_structure_error_names_what_the_user_wrote() -> None:
     assert "no open 'o100 repeat'" in report.refused[0]["error"]
 
 
-def test_plasmac_without_t0_m6_is_refused_at_its_first_torch_start() -> None:
-    report = check_program(["G21 G90", "G0 X5 Y5", "M3 $0 S1", "G1 X9", "M5 $0"])
+def test_plasmac_without_t0_m6_starts_on_a_plasma_only_table_and_not_on_a_shared_one() -> None:
+    """M3 $0 is PlasmaC's torch with no tool change: a plasma table's default starts it; a
+    table with other tools (plasma_mode_at_start false) still wants T0 M6 first."""
+    program = ["G21 G90", "G0 X5 Y5", "M3 $0 S1", "G1 X9", "M5 $0"]
+    assert len(only_ok(check_program(program)).cuts) == 1
+    report = check_program(program, plasma_mode_at_start=False)
     assert [r["line"] for r in report.refused] == [3]
     assert "T0 M6" in report.refused[0]["error"]
+    assert "controller.plasma_mode_at_start = false" in report.refused[0]["error"]
+
+
+def only_ok(report: CheckReport) -> CheckReport:
+    assert report.ok, report.refused
+    return report
+
+
+def test_a_tool_change_on_a_plasma_only_table_is_a_note_not_a_refusal() -> None:
+    """A 2008 SheetCam post's M06 T1 (its plasma tool): neither the scribe nor a reason to
+    leave plasma mode."""
+    for dialect in (Dialect.PLASMAC, Dialect.MASSO):
+        report = only_ok(check_program(
+            ["G21 G90", "M06 T1 F5840 (Plasma 80A 3mm)", "G0 X5 Y5", "M3", "G1 X9 F2000", "M5"],
+            dialect=dialect,
+        ))  # fmt: skip
+        assert len(report.cuts) == 1
+    shared = check_program(["G21", "T1 M6", "M3", "G1 X9 F2000", "M5"], dialect=Dialect.MASSO,
+                           plasma_mode_at_start=False)  # fmt: skip
+    assert [r["line"] for r in shared.refused] == [3]  # MASSO: T1 left plasma mode
 
 
 # --------------------------------------------------------------------------- relay
@@ -152,9 +176,11 @@ def test_relay_program_reports_the_programs_own_heights_and_dwell() -> None:
 
 def test_a_shops_own_torch_codes_are_mapped_and_reported_as_written() -> None:
     unmapped = check("firecontrol_relay.nc")
-    assert unmapped.ok
+    assert not unmapped.ok  # no cut, and codes nobody knows: not "OK, 0 cuts"
     assert not unmapped.cuts
-    assert any("no cut found" in w and "--code" in w for w in unmapped.warnings)
+    errors = [r["error"] for r in unmapped.refused]
+    assert errors[0].startswith("M10: not a code the daemon knows")
+    assert "--code M10=M3 --code M11=M5" in errors[0]
 
     report = check("firecontrol_relay.nc", codes={"M10": "M3", "M11": "M5"})
     cut = only(report)
@@ -186,11 +212,11 @@ def test_masso_g200_change_to_stop_after_pierce_midway() -> None:
 
 
 def test_masso_fusion_post_needs_plasma_mode_at_start() -> None:
-    refused = check("masso_fusion.nc")
+    refused = check("masso_fusion.nc", plasma_mode_at_start=False)
     assert [r["line"] for r in refused.refused] == [5]
     assert "--plasma-mode-at-start" in refused.refused[0]["error"]
 
-    report = check("masso_fusion.nc", plasma_mode_at_start=True)
+    report = check("masso_fusion.nc")  # the default: a plasma-only table
     cut = only(report)
     assert (cut.parameters, cut.sequence) == ("default", "automatic")
     assert cut.feed_mm_min == 2600.0
