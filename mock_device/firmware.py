@@ -23,6 +23,7 @@ __all__ = ["BoardFirmware", "BoardIdentity", "PlantPort", "ZAxisPort"]
 FAULT_REPORT_PERIOD_US = 250_000
 ADC_COUNTS_PER_VOLT = 100  # the simulated front end: a 16-bit ADC in centivolts
 CONTACT_SENSORS = InputMask.OHMIC | InputMask.FLOAT
+PROBE_AWAY_MINOR = 2  # the protocol minor that brought Z_PROBE_AWAY (1.2)
 
 
 class ZAxisPort(Protocol):
@@ -83,9 +84,10 @@ class _Probe:
     sensors: int
     start_z_um: int
     max_travel_um: int
-    contact_z_um: int | None = None
-    fired: int = 0
+    contact_z_um: int | None = None  # where contact (away: the release) was detected
+    fired: int = 0  # the sensors that fired; away: the ones last seen active
     outcome: int | None = None
+    away: bool = False  # Z_PROBE_AWAY (1.2): up until every sensor is released
 
 
 @dataclass
@@ -327,7 +329,9 @@ class BoardFirmware:
             self._ack(seq)
         elif isinstance(msg, fp.ZMove):
             self._z_move(msg)
-        elif isinstance(msg, fp.ZProbe):
+        elif isinstance(msg, fp.ZProbeAway) and self.identity.proto_minor < PROBE_AWAY_MINOR:
+            self._nak(seq, NakCode.UNKNOWN_TYPE, 0)  # as a board of protocol 1.1 or older
+        elif isinstance(msg, fp.ZProbe | fp.ZProbeAway):
             self._z_probe(msg)
         elif isinstance(msg, fp.ZStop):
             self._end_motion(fp.MotionResult.STOPPED, fp.ProbeOutcome.ABORTED)
@@ -367,7 +371,9 @@ class BoardFirmware:
         self.move_seq = msg.seq
         self._ack(msg.seq)
 
-    def _z_probe(self, msg: fp.ZProbe) -> None:
+    def _z_probe(self, msg: fp.ZProbe | fp.ZProbeAway) -> None:
+        """Z_PROBE: down until a sensor of the set is active; Z_PROBE_AWAY: up until every
+        one is released. The same refusals and rules either way (PROTOCOL.md §6.1)."""
         if self.faults:
             self._nak(msg.seq, NakCode.FAULT_LATCHED, self._lowest_fault())
             return
@@ -380,14 +386,17 @@ class BoardFirmware:
         self._end_motion(fp.MotionResult.SUPERSEDED, fp.ProbeOutcome.ABORTED)
         z = self.plant.zaxis
         z_um = _um(z.position_mm)
-        self.probe = _Probe(msg.seq, msg.sensors & CONTACT_SENSORS, z_um, msg.max_travel_um)
+        away = isinstance(msg, fp.ZProbeAway)
+        probe = _Probe(msg.seq, msg.sensors & CONTACT_SENSORS, z_um, msg.max_travel_um, away=away)
+        self.probe = probe
         self._ack(msg.seq)
-        if self.inputs & self.probe.sensors:
-            self.probe.contact_z_um = z_um
-            self.probe.fired = self.inputs & self.probe.sensors
-            self.probe.outcome = fp.ProbeOutcome.CONTACT
+        probe.fired = self.inputs & probe.sensors
+        if bool(probe.fired) != away:  # already in contact (away: released): zero travel
+            probe.contact_z_um = z_um
+            probe.outcome = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
         else:
-            z.jog(-min(msg.feed_um_s, self.identity.max_feed_um_s) / 1000.0)
+            feed_mm_s = min(msg.feed_um_s, self.identity.max_feed_um_s) / 1000.0
+            z.jog(feed_mm_s if away else -feed_mm_s)
 
     def _z_velocity(self, msg: fp.ZVelocity) -> None:
         if not self.session or self.faults:
@@ -615,18 +624,7 @@ class BoardFirmware:
         probe = self.probe
         if probe is not None:
             if probe.outcome is None:
-                fired = self.inputs & probe.sensors
-                if fired:
-                    # The stop happens here, in the sample tick: no host round trip.
-                    probe.contact_z_um, probe.fired = z_um, fired
-                    probe.outcome = fp.ProbeOutcome.CONTACT
-                    z.stop()
-                elif probe.start_z_um - z_um >= probe.max_travel_um:
-                    probe.outcome = fp.ProbeOutcome.NO_CONTACT
-                    z.stop()
-                elif z.limit_hit == "min":
-                    probe.outcome = fp.ProbeOutcome.LIMIT
-                    z.stop()
+                self._probe_tick(probe, z_um)
             if probe.outcome is not None and z.is_idle:
                 self._probe_done(z_um)
         elif self.move_seq is not None and z.is_idle:
@@ -636,6 +634,26 @@ class BoardFirmware:
         if self.zvel_expiry_us is not None and self.t_us >= self.zvel_expiry_us:
             self.zvel_expiry_us = None
             z.stop()
+
+    def _probe_tick(self, probe: _Probe, z_um: int) -> None:
+        """Down until a sensor is active, or (away) up until every one is released."""
+        z = self.plant.zaxis
+        away = probe.away
+        active = self.inputs & probe.sensors
+        if active:
+            probe.fired = active  # away: the last seen active, the last to let go
+        travelled_um = z_um - probe.start_z_um if away else probe.start_z_um - z_um
+        if bool(active) != away:
+            # The stop happens here, in the sample tick: no host round trip.
+            probe.contact_z_um = z_um
+            probe.outcome = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
+        elif travelled_um >= probe.max_travel_um:
+            probe.outcome = fp.ProbeOutcome.NO_RELEASE if away else fp.ProbeOutcome.NO_CONTACT
+        elif z.limit_hit == ("max" if away else "min"):
+            probe.outcome = fp.ProbeOutcome.LIMIT
+        else:
+            return
+        z.stop()
 
     def _sample(self) -> None:
         s = self.sampling
