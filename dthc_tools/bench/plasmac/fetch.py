@@ -183,13 +183,15 @@ class Rs274:
         return env
 
     def run(
-        self, program: Path, *, tool_table: Path, var_file: Path,
+        self, program: Path, *, tool_table: Path, var_file: Path, ini: Path | None = None,
         timeout_s: float = _RS274_TIMEOUT_S,
     ) -> subprocess.CompletedProcess[str]:  # fmt: skip
-        """``rs274 -t tool_table -v var_file -g program``: the canonical calls on stdout, one
-        per line (``STRAIGHT_TRAVERSE(...)``, ``ARC_FEED(...)``, ...), in the program's units;
-        errors on stderr (and a nonzero status)."""
-        cmd = [str(self.binary), "-t", str(tool_table), "-v", str(var_file), "-g", str(program)]
+        """``rs274 [-i ini] -t tool_table -v var_file -g program``: the canonical calls on
+        stdout, one per line (``STRAIGHT_TRAVERSE(...)``, ``ARC_FEED(...)``, ...), in the
+        program's units; errors on stderr (and a nonzero status). ``var_file`` is written
+        back (LinuxCNC saves its parameters at the end): give each run its own."""
+        cmd = [str(self.binary), *(["-i", str(ini)] if ini else [])]
+        cmd += ["-t", str(tool_table), "-v", str(var_file), "-g", str(program)]
         return subprocess.run(  # noqa: S603 - the unpacked rs274, fixed arguments
             cmd, capture_output=True, text=True, env=self.environ(), stdin=subprocess.DEVNULL,
             timeout=timeout_s, check=False,
