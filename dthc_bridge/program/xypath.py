@@ -2,9 +2,10 @@
 millimetres, in program order.
 
 Sans-io. :class:`PathTracer` reads the plan's steps one at a time (motion lines: units,
-G90/G91, G90.1/G91.1, G0-G3 with I J, feed; daemon lines: a cut runs from its M3 to its M5)
-and keeps a :class:`Segment` per planned XY move, each knowing its program line, the plan
-step that moves it and the cut it belongs to. Arcs stay arcs (centre and signed sweep).
+G90/G91, G90.1/G91.1, G0-G3 with I J or R, and P turns; daemon lines: a cut runs from its M3
+to its M5) and keeps a :class:`Segment` per planned XY move, each knowing its program line,
+the plan step that moves it and the cut it belongs to. Arcs stay arcs (centre and signed
+sweep). A G28/G30 return (to a position kept in the machine's parameters) is not traced.
 
 ``dthc-bridge check-program --json`` reports the segments (:func:`path_entries`); the
 reference sender (``dthc_tools.sender.path``) builds its path, where the torch is on it and
@@ -23,7 +24,7 @@ from ..controller.gcode import parse_line
 from ..controller.words import tokenize
 from .plan import DaemonStep, MotionStep, ProgramPlan, Step
 
-__all__ = ["KIND_NAMES", "PathTracer", "Segment", "path_entries", "starts_cut"]
+__all__ = ["KIND_NAMES", "PathTracer", "Segment", "path_entries", "radius_centre", "starts_cut"]
 
 TAU = 2.0 * math.pi
 # G codes whose X/Y words are not a move's target (G10 L20 X, G28 X, G92 X, ...).
@@ -108,7 +109,27 @@ class Segment:
         if self.kind in (2, 3):
             out["center"] = [self.cx, self.cy]
             out["cw"] = self.kind == 2
+            turns = math.ceil(abs(self.sweep) / TAU - 1e-9)
+            if turns > 1:  # G2 P<turns>: whole turns beyond the first
+                out["turns"] = turns
         return out
+
+
+def radius_centre(
+    x0: float, y0: float, x1: float, y1: float, radius: float, *, clockwise: bool
+) -> tuple[float, float]:
+    """The centre of an arc given by its radius (``G2 X Y R``), as LinuxCNC's interpreter
+    finds it (``arc_data_r``): a positive R is the arc of less than half a turn, a negative
+    R the longer one; an R a little short of half the chord is a semicircle."""
+    abs_radius = abs(radius)
+    mid_x, mid_y = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    half_length = math.hypot(mid_x - x1, mid_y - y1)
+    if abs_radius <= 0.0 or half_length / abs_radius > 1.0 - 1e-12:
+        half_length = abs_radius
+    theta = math.atan2(y1 - y0, x1 - x0)
+    theta += -math.pi / 2 if clockwise == (radius > 0) else math.pi / 2
+    offset = abs_radius * math.cos(math.asin(half_length / abs_radius)) if abs_radius else 0.0
+    return mid_x + offset * math.cos(theta), mid_y + offset * math.sin(theta)
 
 
 def starts_cut(command: Command) -> bool:
@@ -167,7 +188,7 @@ class PathTracer:
         for word in tokenize(step.line).words:
             if word.letter == "G":
                 codes.add(word.value)
-            elif word.letter in "XYIJ":
+            elif word.letter in "XYIJRP":
                 coords[word.letter] = word.value
             elif word.letter == "F":
                 self.feed = word.value
@@ -190,15 +211,20 @@ class PathTracer:
         self.x, self.y = x1, y1
         cx = cy = sweep = 0.0
         if self.motion in (2, 3):
-            if self.arc_abs:
+            clockwise = self.motion == 2
+            if "R" in coords:
+                cx, cy = radius_centre(x0, y0, x1, y1, coords["R"] * k, clockwise=clockwise)
+            elif self.arc_abs:
                 cx, cy = coords.get("I", x0 / k) * k, coords.get("J", y0 / k) * k
             else:
                 cx, cy = x0 + coords.get("I", 0.0) * k, y0 + coords.get("J", 0.0) * k
             sweep = math.atan2(y1 - cy, x1 - cx) - math.atan2(y0 - cy, x0 - cx)
-            if self.motion == 2 and sweep >= -1e-12:
+            if clockwise and sweep >= -1e-12:
                 sweep -= TAU
-            elif self.motion == 3 and sweep <= 1e-12:
+            elif not clockwise and sweep <= 1e-12:
                 sweep += TAU
+            extra_turns = max(round(coords.get("P", 1.0)), 1) - 1  # G2 P3: two more turns
+            sweep += (-TAU if clockwise else TAU) * extra_turns
         self.segments.append(
             Segment(
                 index=len(self.segments), kind=self.motion, x0=x0, y0=y0, x1=x1, y1=y1,
