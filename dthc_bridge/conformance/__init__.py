@@ -3,7 +3,8 @@
 Runs a suite of checks against whatever board is on the other end of LINK (``/dev/...``,
 ``socket://HOST:PORT``, ``usb://VID:PID``), with no plasma cutter needed: handshake and
 version, replies and duplicates, corrupt frames, telemetry rate/jitter/gaps and round
-trip, Z velocity expiry, probe stop on contact, input events, the host lease (latched in
+trip, Z velocity expiry, probe stop on contact, the probe away's stop on the release
+(protocol 1.2), input events, the host lease (latched in
 use, a lapse reported at rest), boot id across a reset. Every Z move stays inside a
 window the operator confirms (``--yes``).
 

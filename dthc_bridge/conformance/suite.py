@@ -37,6 +37,7 @@ from .checks_motion import (
     check_probe_contact,
     check_z_velocity_expiry,
 )
+from .checks_probe_away import check_probe_away_release
 from .checks_telemetry import check_telemetry
 from .context import Operator, SuiteContext
 from .errors import ConformanceError
@@ -79,6 +80,12 @@ _STEPS: tuple[_Step, ...] = (
     ),
     _Step(("z_velocity_expiry",), check_z_velocity_expiry),
     _Step(("probe_contact",), check_probe_contact, _probe_timeout_s),
+    # A touch-off, the probe away, the move back.
+    _Step(
+        ("probe_away_release",),
+        check_probe_away_release,
+        lambda o: _probe_timeout_s(o) + o.probe_max_travel_mm / o.probe_feed_mm_s,
+    ),
     _Step(("input_events",), check_input_events, _inputs_timeout_s),
     _Step(("lease_expiry",), check_lease_expiry),
     _Step(("lease_idle_lapse",), check_lease_idle_lapse),
