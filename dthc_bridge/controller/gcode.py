@@ -315,6 +315,8 @@ def _m6(words: Sequence[Word], ctx: _Context) -> Command:
 
 # --------------------------------------------------------------------------- RosettaCNC G100
 
+MAX_PIERCE_DELAY_S = 10.0  # as G200 D's 10 000 ms
+
 _G100_NOT_PLASMA = {
     1: "go to a position",
     2: "axis-free movement",
@@ -345,14 +347,24 @@ def _g100(words: Sequence[Word], ctx: _Context) -> Command:
         return VoltageMode(False, check_range(p.name("B"), p.require("B"), 50.0, 300.0))
     if function == 6:
         p = _Params(command, rest, "ABCDEFHI")
+        # Checked here, in RosettaCNC's words and units: the cut parameters they become
+        # would name MASSO's G200 letters (and D in milliseconds) to a Rosetta user.
+        delay_s = p.non_negative("E")
+        if delay_s > MAX_PIERCE_DELAY_S:
+            hint = (f"; {delay_s:g} looks like milliseconds: E{delay_s / 1000:g} is "
+                    f"{delay_s / 1000:g} s" if delay_s >= 100 else "")  # fmt: skip
+            raise CommandError(
+                p.name("E"), f"pierce delay {delay_s:g} s is out of range "
+                f"0..{MAX_PIERCE_DELAY_S:g} (seconds){hint}",
+            )  # fmt: skip
         return ProbeAndStart(
             z_feed_mm_min=p.positive("A"),
             touch_target_z_mm=p.require("B"),
-            touch_feed_mm_min=p.positive("C"),
-            pierce_height_mm=p.positive("D"),
-            pierce_delay_s=p.non_negative("E"),
+            touch_feed_mm_min=check_range(p.name("C"), p.positive("C"), 1.0, 3000.0),
+            pierce_height_mm=check_range(p.name("D"), p.positive("D"), 0.5, 25.0),
+            pierce_delay_s=delay_s,
             arc_ok_timeout_s=p.positive("F"),
-            cut_height_mm=p.positive("H"),
+            cut_height_mm=check_range(p.name("H"), p.positive("H"), 0.2, 10.0),
             mode=p.choice("I", (0, 1, 2, 3)) if "I" in p.values else 0,
         )
     if function == 7:

@@ -14,6 +14,7 @@ from typing import Any
 
 from ..materials import Material, MaterialError, MaterialTable, material_to_dict
 from ..materials import parse_magic_comment as _parse_magic
+from ..materials.library import MM_PER_INCH
 from .commands import (
     Abort,
     Command,
@@ -134,6 +135,20 @@ class PlasmaController:
         return {
             "material": selected,
             "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
+            "pins": self.pins(material),
+        }
+
+    def pins(self, material: Material) -> dict[str, float]:
+        """What a program's ``#<_hal[...]>`` reads (dthc_bridge/program/plan.READABLE_PINS),
+        in mm: PlasmaC's cut feed and kerf width of the material in force (the 2019 pin name
+        too), and the float switch's travel from the configuration."""
+        scale = MM_PER_INCH if self._in_inches(material) else 1.0
+        kerf = round(material.kerf_width * scale, 6)
+        return {
+            "plasmac.cut-feed-rate": material.cut_speed_mm_min(inch=self._in_inches(material)),
+            "qtplasmac.kerf_width-f": kerf,
+            "plasmac_run.kerf-width-f": kerf,
+            "plasmac.float-switch-travel": self.sequence.config.float_travel_mm,
         }
 
     def end_program(self) -> dict[str, Any]:
@@ -196,6 +211,7 @@ class PlasmaController:
             "material": material.number,
             "name": material.name,
             "cut_feed_mm_min": material.cut_speed_mm_min(inch=self._in_inches(material)),
+            "pins": self.pins(material),
             "params": material_to_dict(material),
         }
 

@@ -18,6 +18,7 @@ import re
 from dataclasses import dataclass
 
 __all__ = [
+    "NESTED_COMMENT",
     "GcodeSyntaxError",
     "Tokens",
     "Word",
@@ -98,6 +99,9 @@ def tokenize(line: str) -> Tokens:
             end = line.find(")", i + 1)
             if end < 0:
                 raise GcodeSyntaxError("(", "comment is not closed with ')'")
+            inner = line.find("(", i + 1, end)
+            if inner >= 0:
+                raise GcodeSyntaxError(line[i : end + 1], NESTED_COMMENT)
             comments.append(line[i + 1 : end].strip())
             tokens += 1
             i = end + 1
@@ -125,6 +129,12 @@ def tokenize(line: str) -> Tokens:
         else:
             raise GcodeSyntaxError(ch if ch.isprintable() else repr(ch), "unexpected character")
     return Tokens(tuple(found), tuple(comments))
+
+
+NESTED_COMMENT = (
+    "a comment inside a comment: '(' again before the first one's ')' (LinuxCNC and grbl "
+    "refuse nested parentheses)"
+)
 
 
 def words(line: str) -> list[tuple[str, float]]:

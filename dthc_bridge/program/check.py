@@ -138,9 +138,7 @@ class _Model:
                     self.material_used = isinstance(command, SelectMaterial | DefineMaterial)
                 if self.open_cut is not None and self.controller.sequence.thc_enabled:
                     self.open_cut.thc = True
-                cut_feed = outcome.data.get("cut_feed_mm_min")
-                if isinstance(cut_feed, int | float):
-                    self.plan.cut_feed_mm_min = float(cut_feed)
+                self.plan.note_pins(outcome.data)
 
     def _z_move(self, z_mm: float) -> None:
         cut = self.open_cut
@@ -240,7 +238,7 @@ def check_program(
         plasma_only=plasma_mode_at_start,
     )
     controller.sequence.plasma_mode = plasma_mode_at_start
-    plan.cut_feed_mm_min = controller.begin_program()["cut_feed_mm_min"]
+    plan.note_pins(controller.begin_program())
     model = _Model(plan, controller)
     motion_m: dict[float, tuple[int, str]] = {}  # M codes sent to motion: first line of each
     tracer = PathTracer(plan)

@@ -68,6 +68,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TypeAlias
 
+from ..controller.words import NESTED_COMMENT
+
 __all__ = ["EvaluatedLine", "HalReader", "NgcError", "NgcProgram", "format_number"]
 
 HalReader = Callable[[str], float]
@@ -408,6 +410,8 @@ class _Parser:
                 close = self.s.find(")", start)
                 if close < 0:
                     raise self.error(start, None, "comment '(' is never closed")
+                if self.s.find("(", start + 1, close) >= 0:
+                    raise self.error(start, close + 1, NESTED_COMMENT)
                 items.append(self.s[start : close + 1])
                 self.i = close + 1
             elif c == ";":

@@ -65,6 +65,12 @@ __all__ = [
 ]
 
 CUT_FEED_PIN = "plasmac.cut-feed-rate"
+FLOAT_TRAVEL_PIN = "plasmac.float-switch-travel"
+KERF_WIDTH_PINS = ("qtplasmac.kerf_width-f", "plasmac_run.kerf-width-f")  # today's, 2019's
+READABLE_PINS = (CUT_FEED_PIN, *KERF_WIDTH_PINS, FLOAT_TRAVEL_PIN)
+"""The HAL pins a program may read (``#<_hal[...]>``): the daemon answers each from the
+material in force or its configuration, in mm (mm/min for the feed); the plan gives them
+in the program's units. The keys of the daemon's ``pins`` answer (program_start, M190)."""
 
 DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
     # FireControl-style programs switch their THC with H1 / H0.
@@ -175,14 +181,14 @@ class _Modal:
 
 @dataclass
 class ProgramPlan:
-    """The steps of one program. ``cut_feed_mm_min`` is read, in the program's units, by
-    ``#<_hal[plasmac.cut-feed-rate]>``: the caller sets it from the daemon's answer to
-    ``M190`` before the next step is taken."""
+    """The steps of one program. ``pins_mm`` holds what ``#<_hal[...]>`` reads (in mm, the
+    program reads them in its units; READABLE_PINS): the caller sets them from the daemon's
+    answers (program_start, ``M190``) before the next step is taken."""
 
     lines: Sequence[str]
     dialect: Dialect
     codes: Mapping[str, str] = field(default_factory=dict)
-    cut_feed_mm_min: float | None = None
+    pins_mm: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     z_stripped: int = 0
 
@@ -208,12 +214,37 @@ class ProgramPlan:
     def pierce_only(self) -> bool:
         return bool(self.parameter("pierce-only"))
 
+    @property
+    def cut_feed_mm_min(self) -> float | None:
+        return self.pins_mm.get(CUT_FEED_PIN)
+
+    @cut_feed_mm_min.setter
+    def cut_feed_mm_min(self, value: float | None) -> None:
+        if value is None:
+            self.pins_mm.pop(CUT_FEED_PIN, None)
+        else:
+            self.pins_mm[CUT_FEED_PIN] = value
+
+    def note_pins(self, answer: Mapping[str, object]) -> None:
+        """The daemon's answer to program_start or M190: the pins it gives (in mm)."""
+        pins = answer.get("pins")
+        if isinstance(pins, Mapping):
+            for pin, value in pins.items():
+                if pin in READABLE_PINS and isinstance(value, int | float):
+                    self.pins_mm[pin] = float(value)
+        elif isinstance(answer.get("cut_feed_mm_min"), int | float):  # an older daemon
+            self.cut_feed_mm_min = float(answer["cut_feed_mm_min"])  # type: ignore[arg-type]
+
     def _hal(self, pin: str) -> float:
-        if pin != CUT_FEED_PIN:
-            raise ValueError(f"HAL pin {pin!r} is not readable here (only {CUT_FEED_PIN})")
-        if self.cut_feed_mm_min is None:  # the daemon did not say (it always does)
-            raise ValueError("the feed of the material in force is not known")
-        return self.cut_feed_mm_min / self._modal.units
+        if pin not in READABLE_PINS:
+            raise ValueError(
+                f"HAL pin {pin!r} is not one the daemon answers (readable: "
+                f"{', '.join(READABLE_PINS)})"
+            )
+        value = self.pins_mm.get(pin)
+        if value is None:  # the daemon did not say (it always does)
+            raise ValueError(f"HAL pin {pin!r}: the daemon gave no value")
+        return value / self._modal.units
 
     # --- steps -----------------------------------------------------------------------------
 
@@ -235,15 +266,20 @@ class ProgramPlan:
             except StopIteration:
                 return
             except NgcError as exc:
-                yield Refused(exc.line, exc.text, str(exc))
+                # The whole line as written; the error names the construct in it.
+                yield Refused(exc.line, self._written(exc.line), f"{exc.text}: {exc.reason}")
                 return
             if not line.text.strip():
                 continue
             try:
                 yield from self._line(line.source_line, line.text)
             except (CommandError, GcodeSyntaxError, ValueError) as exc:
-                yield Refused(line.source_line, line.text.strip(), str(exc))
+                yield Refused(line.source_line, self._written(line.source_line), str(exc))
             self._check_filter_params()
+
+    def _written(self, number: int) -> str:
+        """Line ``number`` (1-based) of the program as the user wrote it."""
+        return self.lines[number - 1].strip() if 0 < number <= len(self.lines) else ""
 
     def _check_filter_params(self) -> None:
         if self._warned_filter or self._ngc is None:

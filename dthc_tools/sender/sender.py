@@ -535,9 +535,8 @@ class Sender:
 
     @staticmethod
     def _note_cut_feed(data: Mapping[str, Any], plan: ProgramPlan) -> None:
-        """The material in force changed (program start, M190): ``plasmac.cut-feed-rate``."""
-        if isinstance(data.get("cut_feed_mm_min"), int | float):
-            plan.cut_feed_mm_min = float(data["cut_feed_mm_min"])
+        """The material in force changed (program start, M190): the HAL pins it reads."""
+        plan.note_pins(data)
 
     async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)

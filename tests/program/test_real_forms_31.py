@@ -1,0 +1,71 @@
+"""Forms real posts write that were refused (issue 31): HAL pins the daemon answers, a
+nested comment and a Rosetta millisecond pierce delay refused in words a user can act on,
+every refusal quoting the whole line as written."""
+
+from __future__ import annotations
+
+import pytest
+
+from dthc_bridge.controller.dialect import Dialect
+from dthc_bridge.materials import Material
+from dthc_bridge.program.check import check_program
+from dthc_bridge.program.plan import READABLE_PINS
+
+KERF_MATERIAL = Material(3, name="mild 3mm", kerf_width=1.2, pierce_height=3.8,
+                         pierce_delay_s=0.4, cut_height=1.5, cut_speed=2400.0)  # fmt: skip
+
+
+@pytest.mark.parametrize("pin", ["qtplasmac.kerf_width-f", "plasmac_run.kerf-width-f"])
+def test_the_kerf_width_pins_read_the_material_in_force_in_the_programs_units(pin: str) -> None:
+    """Today's QtPlasmaC pin and the 2019 PlasmaC one: G20 reads inches."""
+    program = ["G20 G90", "M190 P3", "M66 P3 L3 Q1", f"#<kerf> = #<_hal[{pin}]>",
+               "G0 X[1 + #<kerf>] Y1", "M3 $0 S1", "G1 X3 F#<_hal[plasmac.cut-feed-rate]>",
+               "M5 $0"]  # fmt: skip
+    report = check_program(program, dialect=Dialect.PLASMAC, materials={3: KERF_MATERIAL})
+    assert report.ok, report.refused
+    assert report.cuts[0].feed_mm_min == pytest.approx(2400.0)  # read in inch/min, run as mm
+
+
+def test_the_float_switch_travel_pin_reads_the_configuration() -> None:
+    """A SheetCam tube post's G92 Z[25.0 - #<_hal[plasmac.float-switch-travel]>]."""
+    program = ["G21 G90", "#<keep-z-motion> = 1", "G38.2 Z-30 F300",
+               "G92 Z[25.0 - #<_hal[plasmac.float-switch-travel]>]", "G0 Z3.8", "M3 $0 S1",
+               "G1 X10 F2000", "M5 $0"]  # fmt: skip
+    report = check_program(program, dialect=Dialect.PLASMAC)
+    assert report.ok, report.refused
+
+
+def test_an_unknown_pin_is_refused_naming_it_and_the_readable_ones() -> None:
+    report = check_program(["G21", "#<x> = #<_hal[plasmac.arc-voltage-out]>", "M3", "M5"],
+                           dialect=Dialect.PLASMAC)  # fmt: skip
+    refused = report.refused[0]
+    assert refused["text"] == "#<x> = #<_hal[plasmac.arc-voltage-out]>"  # the whole line
+    assert "'plasmac.arc-voltage-out' is not one the daemon answers" in refused["error"]
+    assert all(pin in refused["error"] for pin in READABLE_PINS)
+
+
+@pytest.mark.parametrize("dialect", [Dialect.PLASMAC, Dialect.MASSO, Dialect.RELAY])
+def test_a_nested_comment_is_called_one_and_the_whole_line_is_quoted(dialect: Dialect) -> None:
+    line = '(*** FIXED: Pierce height 0.12" (was 0.15") ***)'
+    report = check_program(["G20", line, "M3", "G1 X1 F100", "M5"], dialect=dialect)
+    refused = report.refused[0]
+    assert refused["line"] == 2
+    assert refused["text"] == line
+    assert "a comment inside a comment" in refused["error"]
+    assert "nested parentheses" in refused["error"]
+
+
+def test_a_rosetta_pierce_delay_in_milliseconds_names_its_word_unit_and_the_fix() -> None:
+    line = "G100 P6 A1000 B-5 C300 D3.8 E400 F3 H1.5"
+    report = check_program(["G21", line, "G1 X1 F100", "M5"], dialect=Dialect.ROSETTA)
+    refused = report.refused[0]
+    assert refused["text"] == line
+    assert refused["error"] == (
+        "G100 P6 E: pierce delay 400 s is out of range 0..10 (seconds); 400 looks like "
+        "milliseconds: E0.4 is 0.4 s"
+    )
+    good = line.replace("E400", "E0.4")
+    for bad, word in (("D30", "G100 P6 D"), ("H12", "G100 P6 H"), ("C5000", "G100 P6 C")):
+        wrong = good.replace({"D": "D3.8", "H": "H1.5", "C": "C300"}[bad[0]], bad)
+        error = check_program(["G21", wrong, "M5"], dialect=Dialect.ROSETTA).refused[0]["error"]
+        assert error.startswith(f"{word}: "), error
