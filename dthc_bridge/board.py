@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 
 import firmware_protocol as fp
 
-from .link import LinkSupervisor, RequestTimeout
+from .link import BoardTooOld, LinkSupervisor, RequestTimeout
 from .link.session import BoardSession
 from .link.supervisor import ErrorListener, StateListener
 
@@ -25,6 +25,7 @@ Telemetry = fp.Samples | fp.Report
 # An item and its board time in seconds (SAMPLES: of its last sample).
 TelemetryListener = Callable[[Telemetry, float], None]
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
+PROBE_AWAY_MINOR = 2  # Z_PROBE_AWAY came with protocol 1.2
 
 
 def _um(mm: float) -> int:
@@ -173,15 +174,35 @@ class BoardClient:
         max_travel_mm: float,
         sensors: int = fp.InputMask.OHMIC | fp.InputMask.FLOAT,
         timeout_s: float = 20.0,
+        *,
+        away: bool = False,
     ) -> fp.ProbeResult:
-        """Probe down; the board stops on contact by itself and reports where."""
-        seq = await self.start_probe(feed_mm_s, max_travel_mm, sensors)
+        """Probe down; the board stops on contact by itself and reports where (``away``:
+        up, stopped when every sensor is released; PROBE_RESULT RELEASED or NO_RELEASE)."""
+        seq = await self.start_probe(feed_mm_s, max_travel_mm, sensors, away=away)
         return await self.wait_report(fp.ProbeResult, seq, timeout_s)
 
-    async def start_probe(self, feed_mm_s: float, max_travel_mm: float, sensors: int) -> int:
-        """Start a probe; returns its seq once the board accepted it (ACK)."""
-        command = fp.ZProbe(0, _um(feed_mm_s), _um(max_travel_mm), sensors)
-        ack = await self._session().request(command)
+    async def start_probe(
+        self, feed_mm_s: float, max_travel_mm: float, sensors: int, *, away: bool = False
+    ) -> int:
+        """Start a probe (Z_PROBE; ``away``: Z_PROBE_AWAY, refused with BoardTooOld before
+        anything is sent when the board's protocol predates it); returns its seq once the
+        board accepted it (ACK)."""
+        session = self._session()
+        feed_um_s, travel_um = _um(feed_mm_s), _um(max_travel_mm)
+        command: fp.ZProbe | fp.ZProbeAway
+        if away:
+            info = session.info
+            if info is not None and info.proto_minor < PROBE_AWAY_MINOR:
+                raise BoardTooOld(
+                    "Z_PROBE_AWAY",
+                    (fp.PROTOCOL_MAJOR, PROBE_AWAY_MINOR),
+                    (info.proto_major, info.proto_minor),
+                )
+            command = fp.ZProbeAway(0, feed_um_s, travel_um, sensors)
+        else:
+            command = fp.ZProbe(0, feed_um_s, travel_um, sensors)
+        ack = await session.request(command)
         return ack.seq
 
     async def wait_report(self, report: type[_Report], seq: int, timeout_s: float) -> _Report:

@@ -450,8 +450,10 @@ class ControllerService:
             sensors = (fp.InputMask.OHMIC if action.ohmic else 0) | (
                 fp.InputMask.FLOAT if action.float_switch else 0
             )
-            seq = await client.start_probe(action.feed_mm_s, action.max_travel_mm, sensors)
-            self._spawn(self._await_probe(seq))
+            seq = await client.start_probe(
+                action.feed_mm_s, action.max_travel_mm, sensors, away=action.away
+            )
+            self._spawn(self._await_probe(seq, action.away))
         elif isinstance(action, act.StopZ):
             await client.z_stop()
         elif isinstance(action, act.ApplyCurrent):
@@ -475,14 +477,17 @@ class ControllerService:
             )
         self.pump()
 
-    async def _await_probe(self, seq: int) -> None:
+    async def _await_probe(self, seq: int, away: bool = False) -> None:
+        """The probe's outcome to the sequence: ``contact`` is the probe's goal reached,
+        contact (down) or every sensor released (away), at ``contact_z`` (the release's Z)."""
         try:
             done = await self.client.wait_report(fp.ProbeResult, seq, self.command_timeout_s)
         except LinkError as exc:
-            self.sequence.on_action_failed(act.ProbeZ(0, 0, False, False), str(exc))
+            self.sequence.on_action_failed(act.ProbeZ(0, 0, False, False, away), str(exc))
         else:
+            goal = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
             self.sequence.on_probe_done(
-                done.result == fp.ProbeOutcome.CONTACT, bool(done.sensor & fp.InputMask.OHMIC),
+                done.result == goal, bool(done.sensor & fp.InputMask.OHMIC),
                 done.contact_z_um / 1000, done.stop_z_um / 1000,
             )  # fmt: skip
         self.pump()

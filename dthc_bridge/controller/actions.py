@@ -48,10 +48,14 @@ class MoveZ:
 
 @dataclass(frozen=True, slots=True)
 class ProbeZ:
+    """Probe down until a sensor closes; ``away``: up until every one is released (G38.4/
+    G38.5 on Z; a board of protocol 1.2 or later)."""
+
     feed_mm_s: float
     max_travel_mm: float
     ohmic: bool
     float_switch: bool
+    away: bool = False
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from .clock import BoardClock, BoardTimeline, extend_u32
 from .errors import (
     BoardRebooted,
+    BoardTooOld,
     LinkDown,
     LinkError,
     NegativeAck,
@@ -21,6 +22,7 @@ __all__ = [
     "BoardRebooted",
     "BoardSession",
     "BoardTimeline",
+    "BoardTooOld",
     "LinkDown",
     "LinkError",
     "LinkState",

@@ -6,6 +6,7 @@ from firmware_protocol import NakCode
 
 __all__ = [
     "BoardRebooted",
+    "BoardTooOld",
     "LinkDown",
     "LinkError",
     "NegativeAck",
@@ -55,6 +56,19 @@ class ProtocolVersionMismatch(LinkError):
         )
         self.board = board
         self.host = host
+
+
+class BoardTooOld(LinkError):
+    """A command the board's protocol version does not have; refused before it is sent."""
+
+    def __init__(self, command: str, needs: tuple[int, int], board: tuple[int, int]) -> None:
+        super().__init__(
+            f"{command} needs protocol {needs[0]}.{needs[1]}, the board speaks "
+            f"{board[0]}.{board[1]}: update the firmware"
+        )
+        self.command = command
+        self.needs = needs
+        self.board = board
 
 
 class BoardRebooted(LinkError):
