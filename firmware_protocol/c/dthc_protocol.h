@@ -1,5 +1,5 @@
 /*
- * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.1.
+ * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.2.
  *
  * Normative spec: firmware_protocol/PROTOCOL.md. Golden vectors:
  * firmware_protocol/vectors/frames.json (checked by tests/firmware_protocol/test_c_codec.py).
