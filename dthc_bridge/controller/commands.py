@@ -240,11 +240,14 @@ class ProgramZMove:
 class ProbeSurface:
     """A probe the program does itself (``G38.2 Z-50 F300``, Mach3 ``G31``): the board probes
     down with the touch-off sensors and stops on contact. ``z_mm`` is the work Z to probe to
-    at most; ``require_contact`` is G38.2 (no contact is an error) against G38.3."""
+    at most; ``require_contact`` is G38.2 (no contact is an error) against G38.3. ``away``:
+    G38.4/G38.5, up from the work until the sensors release (a FireControl-style lift off the
+    float switch); ``require_contact`` then means the release is required (G38.4)."""
 
     z_mm: float
     feed_mm_min: float
     require_contact: bool = True
+    away: bool = False
 
 
 @dataclass(frozen=True, slots=True)

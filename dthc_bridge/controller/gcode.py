@@ -430,10 +430,12 @@ def _probe(code: str, require_contact: bool) -> Callable[[Sequence[Word], _Conte
     return parse
 
 
-def _probe_away(code: str) -> Callable[[Sequence[Word], _Context], Command]:
-    def parse(_words: Sequence[Word], _ctx: _Context) -> Command:
-        raise CommandError(code, "probing away from the work is not supported: the board "
-                           "probes towards it (use G38.2/G38.3)")  # fmt: skip
+def _probe_away(code: str, require_release: bool) -> Callable[[Sequence[Word], _Context], Command]:
+    """G38.4/G38.5 along Z: the board moves up until the touch-off sensors release."""
+
+    def parse(words: Sequence[Word], _ctx: _Context) -> Command:
+        p = _Params(code, words, "ZF")
+        return ProbeSurface(p.require("Z"), p.positive("F"), require_release, away=True)
 
     return parse
 
@@ -499,8 +501,8 @@ _PLASMA_G: dict[float, tuple[str, _Handler]] = {
     31.0: ("G31", _probe("G31", True)),
     38.2: ("G38.2", _probe("G38.2", True)),
     38.3: ("G38.3", _probe("G38.3", False)),
-    38.4: ("G38.4", _probe_away("G38.4")),
-    38.5: ("G38.5", _probe_away("G38.5")),
+    38.4: ("G38.4", _probe_away("G38.4", True)),
+    38.5: ("G38.5", _probe_away("G38.5", False)),
     100.0: ("G100", _g100),
     200.0: ("G200", _g200),
 }

@@ -355,6 +355,8 @@ class PlasmaController:
         """Z words of the program: Z belongs to the board, so they come here, not to motion."""
         sequence = self.sequence
         word = {ProgramZMove: "Z", ProbeSurface: "G38.2", SetWorkZ: "G92 Z"}[type(command)]
+        if isinstance(command, ProbeSurface) and command.away:
+            word = "G38.4" if command.require_contact else "G38.5"
         if sequence.state is State.FAULTED:
             raise CommandError(word, f"re-arm required after: {sequence.error}")
         if isinstance(command, SetWorkZ):
@@ -373,6 +375,7 @@ class PlasmaController:
                 sequence.work_zero_mm + command.z_mm,
                 command.feed_mm_min / 60.0,
                 command.require_contact,
+                away=command.away,
             )
             return Outcome(deferred=True)
         target = command.z_mm if command.machine else sequence.work_zero_mm + command.z_mm

@@ -188,6 +188,7 @@ class CutSequence:
         self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
         self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
         self._probe_requires_contact = True
+        self._probe_away = False  # the program's probe runs up (G38.4/G38.5)
         self._test_return_mm = math.nan  # a probe test goes back to this Z
         self._test_error = ""  # a probe test without contact: the answer once back
 
@@ -494,22 +495,41 @@ class CutSequence:
         return None
 
     def probe_surface(
-        self, now: float, target_mm: float, feed_mm_s: float, require_contact: bool
+        self,
+        now: float,
+        target_mm: float,
+        feed_mm_s: float,
+        require_contact: bool,
+        *,
+        away: bool = False,
     ) -> None:
         """The program's own probe (G38.2/G38.3): the board probes down with the touch-off
-        sensors and stops on contact. Answered (CommandReply "probe") with the outcome."""
+        sensors and stops on contact; ``away`` (G38.4/G38.5): up until they release.
+        Answered (CommandReply "probe") with the outcome."""
         self.now = now
         self._pending_reply = "probe"
-        travel = self._z_mm - max(target_mm, self.config.z_min_mm)
+        if away:
+            top = self.config.z_max_mm - self.config.top_margin_mm
+            travel = min(target_mm, top) - self._z_mm
+            where = "above"
+        else:
+            travel = self._z_mm - max(target_mm, self.config.z_min_mm)
+            where = "below"
         if math.isnan(travel) or travel <= 0:
-            self._reply(False, f"probe target {target_mm:.3f} is not below the torch")
+            self._reply(False, f"probe target {target_mm:.3f} is not {where} the torch")
+            return
+        if away and not self._debounced & (InputMask.FLOAT | InputMask.OHMIC):
+            # As LinuxCNC: a probe away must start in contact, or it could never release.
+            self._reply(False, "the touch-off sensors are already released: nothing to probe "
+                        "away from (G38.4/G38.5 start in contact)")  # fmt: skip
             return
         self._probe_requires_contact = require_contact
+        self._probe_away = away
         self._enter(State.PROGRAM_PROBE)
         ohmic = self.params.ohmic
         if ohmic:
             self._emit(act.SwitchOhmicSense(True))
-        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, True))
+        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, True, away=away))
 
     def set_work_z(self, z_mm: float | None) -> None:
         """G92 Z / G10 L20 Z: the current Z reads ``z_mm``; None (G92.1) clears the origin."""
@@ -624,6 +644,8 @@ class CutSequence:
             self._enter(State.IDLE)
             if contact or not self._probe_requires_contact:
                 self._reply(True)
+            elif self._probe_away:
+                self._reply(False, "the sensors never released while probing away (G38.4)")
             else:
                 self._reply(False, "no contact while probing (plate missing or Z min reached)")
             return

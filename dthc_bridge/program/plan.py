@@ -77,7 +77,7 @@ DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
     Dialect.RELAY: {"H1": "M667", "H0": "M666"},
 }
 
-_PROBE_G = frozenset({31.0, 38.2, 38.3, 38.4, 38.5})  # the board probes (and refuses 38.4/5)
+_PROBE_G = frozenset({31.0, 38.2, 38.3, 38.4, 38.5})  # the board probes (38.4/5: away, up)
 _ORIGIN_G = frozenset({92.0, 10.0, 92.1})  # G92 Z, G10 L20 Z, G92.1: the board's Z origin
 
 _FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter", "tube-cut")

@@ -89,3 +89,23 @@ def test_the_over_cut_turns_the_torch_off_and_motion_goes_on_without_a_fault() -
     assert not loop.plant.torch_on
     assert loop.m5().ok
     assert loop.pauses == []
+
+
+def test_a_fire_control_lift_off_the_float_switch_with_g38_4_then_g92() -> None:
+    """FireControl's touch-off: G38.2 down to the plate, G38.4 up until the float switch
+    opens (the board probes away), then G92 Z sets the origin there, as with G38.2."""
+    loop = ready()
+    assert loop.gcode("G200").ok
+    assert loop.gcode("G38.2 Z-50 F300").ok
+    touched = loop.plant.zaxis.position_mm
+    lifted = loop.gcode("G38.4 Z0.5 F20")
+    assert lifted.ok, lifted.error
+    released = loop.plant.zaxis.position_mm
+    assert touched < released < touched + 2.0  # off the switch, not up to the target
+    assert loop.gcode("G92 Z0").ok
+    assert loop.sequence.work_zero_mm == pytest.approx(released, abs=0.01)
+    assert loop.sequence.state is State.IDLE
+    # Off the switch now: a probe away must start in contact (as LinuxCNC's).
+    for code in ("G38.4", "G38.5"):
+        assert "already released" in loop.gcode(f"{code} Z3 F20").error
+    assert "not above the torch" in loop.gcode("G38.4 Z-5 F20").error
