@@ -390,6 +390,45 @@ def test_the_path_is_rs274s_on_every_form_of_ngc(
     assert not result.problems, "\n".join(result.problems)
 
 
+# Precedence, associativity, signs, MOD of negatives, ROUND/FIX/FUP of negatives, number
+# forms, names with spaces and case, globals set in a sub, EXISTS of a sub's local.
+EXPRESSIONS = [
+    'G21 G90',
+    'G0 X[2 + 3 * 4 ** 2 / 8 MOD 5] Y[1 - 2 - 3]',
+    'G0 X[2 ** 3 ** 2] Y[8 / 2 / 2]',
+    'G0 X[1 LT 2 EQ 1] Y[-1 MOD 3]',
+    'G0 X[ROUND[-2.5]] Y[FIX[-2.5]]',
+    'G0 X[FUP[-2.5]] Y[1 AND 2 OR 0]',
+    'G0 X1. Y.5',
+    'G0 X+.5 Y-.25',
+    'G0 X[10 MOD -3] Y[-10 MOD 3]',
+    'G0 X[5.5 MOD 2] Y[ATAN[-1]/[-1]]',
+    'G0 X[SIN[1000]] Y[COS[-45]]',
+    '#<My Var> = 3',
+    'G0 X#<myvar> Y#<MYVAR>',
+    '#<_g> = 2',
+    'o<s> sub',
+    '  #<_g> = [#<_g> * #1 + #2]',
+    '  #<loc> = 9',
+    '  G0 X#<_g> Y[#3 + 1]',
+    'o<s> endsub',
+    'o<s> call [3]',
+    'G0 X#<_g> Y[EXISTS[#<loc>]]',
+    'G0 X[3 - -2] Y[-[2]]',
+    'G0 X[0.1 + 0.2] Y[1000]',
+    'M2',
+]  # fmt: skip
+
+
+def test_expressions_as_rs274_reads_them(
+    rs274: Rs274, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every expression form gives rs274's number (to its 4 printed decimals)."""
+    result = compare_lines(EXPRESSIONS, "expressions.ngc", rs274, tmp_path, monkeypatch)
+    assert result.moves == 15
+    assert not result.problems, "\n".join(result.problems)
+
+
 # Where LinuxCNC 2.9's interpreter (Debian 12's rs274) and our evaluator part, each a small
 # program: reported, not yet decided (follow LinuxCNC, or refuse the construct).
 LOOP_DISAGREEMENTS: dict[str, tuple[list[str], str]] = {
