@@ -23,8 +23,43 @@ def _cutting_segments(telemetry: list[dict[str, Any]]) -> list[list[dict[str, An
     return segments
 
 
+S1_STATES = frozenset({"s1_raise", "s1_wait_cycle_start", "s1_lower"})
+
+
+def _one_row_per_cut(
+    spans: list[dict[str, Any]], events: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """The mock's arc-on spans as cuts: a G200 S1 cut lights twice (its pierce, then the
+    relight after cycle start) and is one cut. A span is joined to the one before it when
+    the daemon's sequence stopped after the pierce between their starts (board time, the
+    clock of both)."""
+    stops = [e["t"] for e in events if e.get("topic") == "event"
+             and e.get("type") == "sequence" and e.get("state") in S1_STATES
+             and isinstance(e.get("t"), int | float)]  # fmt: skip
+    cuts: list[dict[str, Any]] = []
+    for span in spans:
+        last = cuts[-1] if cuts else None
+        if last is not None and any(last["start_t_s"] <= t <= span["start_t_s"] for t in stops):
+            cuts[-1] = _joined(last, span)
+        else:
+            cuts.append(dict(span))
+    return cuts
+
+
+def _joined(pierce: dict[str, Any], relit: dict[str, Any]) -> dict[str, Any]:
+    """An S1 cut's two spans: burn time and dives of both, height figures of the cut."""
+    return {
+        **relit,
+        "start_t_s": pierce["start_t_s"],
+        "duration_s": pierce["duration_s"] + relit["duration_s"],
+        "dives": pierce["dives"] + relit["dives"],
+        "min_height_mm": min(pierce["min_height_mm"], relit["min_height_mm"]),
+    }
+
+
 def summarize(result: StackResult, telemetry_hz: float) -> dict[str, Any]:
-    cuts_truth: list[dict[str, Any]] = result.mock_exit.get("cuts", [])
+    spans: list[dict[str, Any]] = result.mock_exit.get("cuts", [])
+    cuts_truth = _one_row_per_cut(spans, result.events)
     segments = _cutting_segments(result.telemetry)
     period = 1.0 / telemetry_hz
     cuts = []
@@ -57,7 +92,7 @@ def summarize(result: StackResult, telemetry_hz: float) -> dict[str, Any]:
     measured = [c for c in cuts if c["arc_on_s"] > 0]
     return {
         "cuts": cuts,
-        "pierces": len(cuts_truth),
+        "pierces": len(spans),  # arc starts: an S1 cut pierces, then relights
         "completed_cuts": sum(1 for c in cuts if c["dives"] == 0) if result.report.ok else 0,
         "safety_violations": sum(violations.values()),
         "violations": violations,

@@ -111,8 +111,12 @@ async def test_masso_program_stops_after_pierce_midway_and_goes_on_at_cycle_star
     assert report.ok, report.error
     assert summary["errors"] == [], summary["errors"]
     assert summary["safety_violations"] == 0
-    # The S1 cut lit twice (its pierce, then the relight after cycle start): the mock's
-    # truth counts each arc-on span as a cut.
+    # The S1 cut lit twice (its pierce, then the relight after cycle start): three arc
+    # starts, two cuts, one row each, the THC's figures on the cut they belong to.
     assert summary["pierces"] == 3
-    assert summary["completed_cuts"] == 3
+    assert summary["completed_cuts"] == 2
+    cuts = summary["cuts"]
+    assert isinstance(cuts, list)
+    assert len(cuts) == 2
+    assert all(cut["thc_active_s"] > 0.5 for cut in cuts), cuts
     assert summary["torch_on_at_exit"] is False
