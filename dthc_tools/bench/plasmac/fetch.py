@@ -189,12 +189,15 @@ class Rs274:
         """``rs274 [-i ini] -t tool_table -v var_file -g program``: the canonical calls on
         stdout, one per line (``STRAIGHT_TRAVERSE(...)``, ``ARC_FEED(...)``, ...), in the
         program's units; errors on stderr (and a nonzero status). ``var_file`` is written
-        back (LinuxCNC saves its parameters at the end): give each run its own."""
-        cmd = [str(self.binary), *(["-i", str(ini)] if ini else [])]
-        cmd += ["-t", str(tool_table), "-v", str(var_file), "-g", str(program)]
+        back (LinuxCNC saves its parameters at the end): give each run its own. rs274 runs in
+        the var file's directory and is given its bare name: it fails to save the file when
+        its path is longer than about 95 characters (pytest's temporary paths are)."""
+        cmd = [str(self.binary), *(["-i", str(ini.resolve())] if ini else [])]
+        cmd += ["-t", str(tool_table.resolve()), "-v", var_file.name]
+        cmd += ["-g", str(program.resolve())]
         return subprocess.run(  # noqa: S603 - the unpacked rs274, fixed arguments
             cmd, capture_output=True, text=True, env=self.environ(), stdin=subprocess.DEVNULL,
-            timeout=timeout_s, check=False,
+            cwd=var_file.parent, timeout=timeout_s, check=False,
         )  # fmt: skip
 
 
