@@ -146,9 +146,14 @@ async def test_program_start_tells_the_sender_the_shops_set_up(library: Path) ->
     assert (await service.execute_gcode("M190 P3", dialect=Dialect.PLASMAC)).ok
     result = await service.execute_request("program_start", {})
     assert result.ok, result.error
-    assert result.data == {
+    data = dict(result.data)
+    pins = data.pop("pins")  # what the program's #<_hal[...]> reads, in mm
+    assert data == {
         "material": 3,
         "cut_feed_mm_min": 3000.0,
         "dialect": "relay",
         "codes": {"H1": "M667", "M10": "M3"},
     }
+    assert isinstance(pins, dict)
+    assert pins["plasmac.cut-feed-rate"] == 3000.0
+    assert pins["plasmac.float-switch-travel"] == service.sequence.config.float_travel_mm
