@@ -574,6 +574,13 @@ class _Builder:
                 o.head.label == label and o.head.keyword in _LOOPS for o in self.stack
             ):
                 raise self.fail(line, f"not inside a loop 'o{label}'")
+            if kw in ("break", "continue") and any(
+                o.head.label == label and o.head.keyword == "repeat" for o in self.stack
+            ):
+                # LinuxCNC's interpreter refuses it ('no matching while/do label'): a
+                # program that runs here would not run there.
+                raise self.fail(line, f"'{kw}' works in while and do loops, not in repeat "
+                                "(LinuxCNC refuses it)")  # fmt: skip
             if kw == "return" and not (
                 self.stack and self.stack[0].node is None and self.stack[0].head.label == label
             ):

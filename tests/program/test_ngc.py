@@ -252,7 +252,7 @@ o6 while [#1 GT 0]
     assert run(source) == ["G0 X10", "G0 Y6", "G0 Y1", "G0 Y-4"]
 
 
-def test_nested_repeats_and_break_out_of_the_outer_loop() -> None:
+def test_break_out_of_a_repeat_loop_is_refused_as_linuxcnc_refuses_it() -> None:
     source = """\
 #1 = 0
 o1 repeat [3]
@@ -268,7 +268,8 @@ o4 repeat [0]
   G0 Y1
 o4 endrepeat
 """
-    assert run(source) == ["G0 X1", "G0 X2", "G0 X3", "G0 X4"]
+    with pytest.raises(NgcError, match="works in while and do loops, not in repeat"):
+        run(source)
 
 
 def test_m2_and_m30_end_the_program_even_inside_a_sub() -> None:

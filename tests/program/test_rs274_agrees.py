@@ -54,13 +54,7 @@ TOLERANCE_MM = 0.001
 PRINTED_DIGIT = 0.0001  # rs274 prints 4 decimals, in the program's units
 
 # Disagreements found with rs274 and reported, not yet fixed in the evaluator: name -> why.
-KNOWN_DISAGREEMENTS: dict[str, str] = {
-    "plasmac_material_overcut.ngc": (
-        "line 25 'G3 X155 Y105 I-10 J0' (from X150 Y100): the end is 15.8114 mm from the "
-        "centre X140 Y100, the start 10 mm; rs274 refuses it ('Radius to end of arc differs "
-        "from radius to start'), our plan accepts it as an arc"
-    ),
-}
+KNOWN_DISAGREEMENTS: dict[str, str] = {}
 
 # Words rs274 cannot read and that move no axis: a line holding one is taken out.
 _TAKEN_OUT = re.compile(
@@ -448,20 +442,6 @@ LOOP_DISAGREEMENTS: dict[str, tuple[list[str], str]] = {
         "after line 6's 'o30 break' out of a while loop, rs274 runs the do/while loop of "
         "lines 10-13 once (Y30; LinuxCNC issue #1307, open); ours three times (Y30 Y40 Y50)",
     ),
-    "break_in_repeat": (
-        ["G21 G90", "#<j> = 0", "o20 repeat [4]", "  #<j> = [#<j> + 1]",
-         "  o22 if [#<j> EQ 3]", "    o20 break", "  o22 endif", "  G0 Y#<j>",
-         "o20 endrepeat", "M2"],
-        "line 6 'o20 break' in a repeat loop: rs274 refuses the program ('no matching "
-        "while/do label ... found repeat'); ours runs it (Y1, Y2)",
-    ),
-    "continue_in_repeat": (
-        ["G21 G90", "#<j> = 0", "o20 repeat [3]", "  #<j> = [#<j> + 1]",
-         "  o21 if [#<j> EQ 2]", "    o20 continue", "  o21 endif", "  G0 Y#<j>",
-         "o20 endrepeat", "M2"],
-        "line 6 'o20 continue' in a repeat loop: rs274 refuses the program ('no matching "
-        "while/do label ... found repeat'); ours runs it (Y1, Y3)",
-    ),
 }  # fmt: skip
 
 
@@ -478,6 +458,31 @@ def test_loop_control_as_rs274_runs_it(
     lines, _ = LOOP_DISAGREEMENTS[case]
     result = compare_lines(lines, f"{case}.ngc", rs274, tmp_path, monkeypatch)
     assert not result.problems, "\n".join(result.problems)
+
+
+REFUSED_BY_BOTH = {
+    "break_in_repeat": ["G21 G90", "#<j> = 0", "o20 repeat [4]", "  #<j> = [#<j> + 1]",
+                        "  o22 if [#<j> EQ 3]", "    o20 break", "  o22 endif", "  G0 Y#<j>",
+                        "o20 endrepeat", "M2"],
+    "continue_in_repeat": ["G21 G90", "#<j> = 0", "o20 repeat [3]", "  #<j> = [#<j> + 1]",
+                           "  o21 if [#<j> EQ 2]", "    o20 continue", "  o21 endif",
+                           "  G0 Y#<j>", "o20 endrepeat", "M2"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(REFUSED_BY_BOTH))
+def test_break_and_continue_in_a_repeat_loop_are_refused_as_rs274_refuses_them(
+    case: str, rs274: Rs274, tmp_path: Path
+) -> None:
+    lines = REFUSED_BY_BOTH[case]
+    program = tmp_path / f"{case}.ngc"
+    program.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    theirs = run_rs274(rs274, program)
+    assert theirs.returncode != 0
+    assert "no matching while/do label" in theirs.stderr
+    ours = check_program(lines, dialect=Dialect.PLASMAC)
+    assert [r["line"] for r in ours.refused] == [6]
+    assert "not in repeat (LinuxCNC refuses it)" in ours.refused[0]["error"]
 
 
 LOOPS_AGREEING: dict[str, tuple[list[str], int]] = {  # program, moves
