@@ -128,7 +128,9 @@ def detect_dialect(
         (Dialect.ROSETTA, r"\bG\s*100\s*P", "G100 P"),
         (Dialect.PLASMAC, r"\$\s*-?[0-2]\b|\bM\s*190\b|\(o=|#<|\bo\s*(?:<|\d)",
          "$n/M190/(o=)/#<…>/o-words"),
-        (Dialect.RELAY, r"\bG\s*(?:38\.[2-5]|31)\b", "a probe (G38.2/G31) in the program"),
+        # Relay only when the program handles Z itself: it probes and sets its Z origin.
+        (Dialect.RELAY, r"\bG\s*(?:38\.[2-5]|31)\b(?=[\s\S]*\bG\s*(?:92|10\s*L\s*20)\b[^\n]*Z)",
+         "a probe (G38.2/G31) and its own Z origin (G92 Z): the program handles Z itself"),
     ]  # fmt: skip
     for dialect, pattern, found in checks:
         if re.search(pattern, text, re.IGNORECASE):

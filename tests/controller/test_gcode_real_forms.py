@@ -213,9 +213,11 @@ def test_a_probe_needs_its_target_and_feed(line: str, word: str) -> None:
     assert "missing" in err.reason
 
 
-@pytest.mark.parametrize("line", ["G38.4 Z5 F100", "G38.5 Z5 F100"])
-def test_probing_away_is_refused(line: str) -> None:
-    assert "probing away" in error(line, RELAY).reason
+@pytest.mark.parametrize(
+    ("line", "release_required"), [("G38.4 Z5 F100", True), ("G38.5 Z5 F100", False)]
+)
+def test_probing_away_is_a_probe_up_to_the_release(line: str, release_required: bool) -> None:
+    assert commands(line, RELAY) == (ProbeSurface(5.0, 100.0, release_required, away=True),)
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,7 @@ import pytest
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.materials import Material
 from dthc_bridge.program.check import check_program
-from dthc_bridge.program.plan import READABLE_PINS
+from dthc_bridge.program.plan import READABLE_PINS, detect_dialect
 
 KERF_MATERIAL = Material(3, name="mild 3mm", kerf_width=1.2, pierce_height=3.8,
                          pierce_delay_s=0.4, cut_height=1.5, cut_speed=2400.0)  # fmt: skip
@@ -69,3 +69,12 @@ def test_a_rosetta_pierce_delay_in_milliseconds_names_its_word_unit_and_the_fix(
         wrong = good.replace({"D": "D3.8", "H": "H1.5", "C": "C300"}[bad[0]], bad)
         error = check_program(["G21", wrong, "M5"], dialect=Dialect.ROSETTA).refused[0]["error"]
         assert error.startswith(f"{word}: "), error
+
+
+def test_the_relay_dialect_is_detected_only_when_the_program_handles_z_itself() -> None:
+    """A probe and its own Z origin: relay; a probe alone is a probe, not a relay program."""
+    both, why = detect_dialect(["G21", "G38.2 Z-20 F100", "G92 Z0", "M3", "M5"])
+    assert both is Dialect.RELAY
+    assert "handles Z itself" in why
+    probe_only, _ = detect_dialect(["G21", "G38.2 Z-20 F100", "G0 Z3", "M3", "M5"])
+    assert probe_only is not Dialect.RELAY
