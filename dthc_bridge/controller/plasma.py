@@ -196,7 +196,14 @@ class PlasmaController:
     ) -> dict[str, Any]:
         """Put ``material`` in force (``params``: already checked by _material_params)."""
         sequence = self.sequence
-        sequence.set_params(params or self._material_params(material, word))
+        if material.positions_nothing:
+            # QtPlasmaC's tube cutting: the program probes and moves Z itself; the torch
+            # starts where it put it, after the material's pierce delay.
+            if sequence.busy:
+                raise CommandError(word, f"not during a cut ({sequence.state})")
+            sequence.program_positions(material.pierce_delay_s)
+        else:
+            sequence.set_params(params or self._material_params(material, word))
         sequence.set_thc(material.thc)
         sequence.config = replace(
             sequence.config,
@@ -338,12 +345,14 @@ class PlasmaController:
         if magic is None:
             raise CommandError(word, "not a material comment (o=0, o=1 or o=2)")
         # A temporary material is used at once: check it can be before it is defined.
-        params = self._material_params(magic.material, word) if magic.option == 0 else None
+        params = None
+        if magic.option == 0 and not magic.material.positions_nothing:
+            params = self._material_params(magic.material, word)
         try:
             material = self.materials.apply(magic)
         except MaterialError as exc:
             raise CommandError(word, str(exc)) from None
-        if params is not None:
+        if magic.option == 0:
             data = self._use_material(material, word, params)
             return Outcome(data={**data, "defined": material.number})
         return Outcome(

@@ -150,6 +150,7 @@ class CutSequence:
         self.thc = thc or ThcController()
         self.params = CutParams()
         self.g200_active = True  # MASSO power-on default
+        self.relay_pierce_delay_s = 0.0  # a tube material's pierce delay (program_positions)
         self.plasma_mode = False
         self.mode = ThcMode.ARC_OK_AND_VOLTAGE
         self.thc_enabled = False  # M667 turns it on
@@ -256,7 +257,14 @@ class CutSequence:
     def set_params(self, params: CutParams) -> None:
         self.params = params
         self.g200_active = True
+        self.relay_pierce_delay_s = 0.0
         self.thc.anti_dive_percent = params.anti_dive_percent
+
+    def program_positions(self, pierce_delay_s: float) -> None:
+        """A material that positions nothing (QtPlasmaC's tube cutting): cuts start as the
+        program's own (it probes and sets Z), with this pierce delay before M3 is answered."""
+        self.g200_active = False
+        self.relay_pierce_delay_s = pierce_delay_s
 
     def set_thc(self, enabled: bool, z_feed_mm_min: float | None = None) -> None:
         if enabled and not self.thc_enabled and self.in_relay_cut:
@@ -959,7 +967,9 @@ class CutSequence:
             if self._arc_ok():
                 cut.arc_ok_since = now
                 self.pierce_count += 1
-                if cut.relay:
+                if cut.relay and self.relay_pierce_delay_s > 0:
+                    self._enter(State.PIERCE_DELAY, self.relay_pierce_delay_s)
+                elif cut.relay:
                     self._start_cutting()  # the program does its own pierce delay
                 elif cut.relit:
                     self._enter(State.TO_CUT_HEIGHT)
@@ -1043,6 +1053,9 @@ class CutSequence:
     def _after_pierce(self) -> None:
         assert self.cut is not None
         cfg = self.config
+        if self.cut.relay:  # the program's own heights: cutting where it put the torch
+            self._start_cutting()
+            return
         if self.params.stop_after_pierce and not self.cut.relit:
             self._emit(act.SwitchTorch(False))
             self._enter(State.S1_RAISE)

@@ -113,7 +113,8 @@ class Material:
                 "cut_mode", f"must be 0 (not set), 1, 2 or 3, got {self.cut_mode!r}"
             )
         for attr in _POSITIVE:
-            self._check_number(attr, positive=True)
+            # A temporary tube material may leave them 0 (the program positions the torch).
+            self._check_number(attr, positive=not self.positions_nothing)
         for attr in _NON_NEGATIVE:
             self._check_number(attr, positive=False)
 
@@ -128,6 +129,13 @@ class Material:
         if value < 0:
             raise MaterialError(attr, f"must be 0 or more, got {value:g}")
         object.__setattr__(self, attr, float(value))
+
+    @property
+    def positions_nothing(self) -> bool:
+        """QtPlasmaC's tube-cutting material (``o=0`` with only ``pd`` while ``#<tube-cut> =
+        1``): a temporary material whose pierce height, cut height and feed are all 0, so
+        the program's own probe, Z moves and feeds position the torch."""
+        return self.temporary and not (self.pierce_height or self.cut_height or self.cut_speed)
 
     @property
     def temporary(self) -> bool:

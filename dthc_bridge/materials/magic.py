@@ -64,6 +64,11 @@ class MagicMaterial:
             raise MaterialError("nu", f"must be 1 to {TEMPORARY_BASE - 1} for option {self.option}")
 
 
+TUBE_DEFAULTS = {"ph": "0", "ch": "0", "fr": "0"}
+"""What QtPlasmaC's filter gives a tube-cutting temporary material for the keys it left out
+(#<tube-cut> = 1, o=0 with pd only): the plan fills them in (dthc_bridge/program/plan.py)."""
+
+
 def parse_magic_comment(text: str) -> MagicMaterial | None:
     """The material a comment defines, or None when the comment is not a magic comment.
 

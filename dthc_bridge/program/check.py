@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..config import ConfigError, load_config
+from ..config import ConfigError, ControllerSettings, load_config
 from ..controller.commands import (
     CommandError,
     DefineMaterial,
@@ -197,6 +197,9 @@ class _Model:
             cut.pierce_height_mm = self.last_z_mm
             cut.pierce_delay_s, cut.cut_height_mm = 0.0, cut.pierce_height_mm
             self._relay_dwell_due = self._relay_height_due = True
+            if sequence.relay_pierce_delay_s > 0:  # a tube material's: the daemon waits it
+                cut.pierce_delay_s = sequence.relay_pierce_delay_s
+                self._relay_dwell_due = False
         report.cuts.append(cut)
         self.open_cut = cut
 
@@ -363,7 +366,9 @@ def run_from_args(args: argparse.Namespace) -> int:
             else daemon.plasma_mode_at_start if daemon else True
         ),
         default_feed_mm_min=daemon.default_cut_feed_mm_min if daemon else 3000.0,
-        fallback_dialect=Dialect(daemon.dialect) if daemon else None,
+        # As the daemon runs it: its controller.dialect (by default, the default daemon's)
+        # for a program with nothing dialect-specific in it.
+        fallback_dialect=Dialect((daemon or ControllerSettings()).dialect),
     )  # fmt: skip
     print(json.dumps(report.as_dict()) if args.json else _text(report, args.file))
     return 0 if report.ok else 1

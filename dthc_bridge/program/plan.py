@@ -49,6 +49,7 @@ from ..controller.dialect import Dialect
 from ..controller.gcode import ParsedLine, parse_line
 from ..controller.words import GcodeSyntaxError, Word, tokenize
 from ..materials.library import MM_PER_INCH
+from ..materials.magic import TUBE_DEFAULTS
 from .ngc import EvaluatedLine, NgcError, NgcProgram
 from .ngc import format_number as _fmt
 
@@ -80,7 +81,7 @@ DEFAULT_CODES: Mapping[Dialect, Mapping[str, str]] = {
 _PROBE_G = frozenset({31.0, 38.2, 38.3, 38.4, 38.5})  # the board probes (38.4/5: away, up)
 _ORIGIN_G = frozenset({92.0, 10.0, 92.1})  # G92 Z, G10 L20 Z, G92.1: the board's Z origin
 
-_FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter", "tube-cut")
+_FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter")
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,6 +159,19 @@ def _code_key(letter: str, value: float) -> str:
     return f"{letter.upper()}{value:g}"
 
 
+_TUBE_MATERIAL = re.compile(r"\(\s*o\s*=\s*0\b[^)]*\)")
+
+
+def _with_tube_defaults(match: re.Match[str]) -> str:
+    """A tube program's ``(o=0, pd=...)`` with QtPlasmaC's defaults for what it left out."""
+    comment = match.group(0)[1:-1]
+    given = {part.split("=", 1)[0].strip() for part in comment.split(",") if "=" in part}
+    if "pd" not in given:
+        return match.group(0)  # refused by the daemon as any material without pd
+    missing = [f"{key}={value}" for key, value in TUBE_DEFAULTS.items() if key not in given]
+    return "(" + ", ".join([comment.strip(), *missing]) + ")"
+
+
 def _strip_hash_comment(line: str) -> str:
     """MASSO: ``#`` outside parentheses starts a comment."""
     depth = 0
@@ -210,7 +224,17 @@ class ProgramPlan:
 
     @property
     def keep_z_motion(self) -> bool:
-        return self.dialect is not Dialect.PLASMAC or bool(self.parameter("keep-z-motion"))
+        return (
+            self.dialect is not Dialect.PLASMAC
+            or bool(self.parameter("keep-z-motion"))
+            or self.tube_cut  # a tube program probes and moves Z itself
+        )
+
+    @property
+    def tube_cut(self) -> bool:
+        """QtPlasmaC's ``#<tube-cut> = 1``: Z motion kept, and a temporary material may give
+        only its pierce delay (pierce height, cut height and feed 0: the program's own)."""
+        return self.dialect is Dialect.PLASMAC and bool(self.parameter("tube-cut"))
 
     @property
     def pierce_only(self) -> bool:
@@ -299,6 +323,8 @@ class ProgramPlan:
     def _line(self, number: int, text: str) -> Iterator[Step]:
         here = text.strip()  # as written: a mapped code is reported as the user wrote it
         text = self._mapped(text)
+        if self.tube_cut:
+            text = _TUBE_MATERIAL.sub(_with_tube_defaults, text)
         words = list(tokenize(text).words)
         gs = {w.value for w in words if w.letter == "G"}
         ms = {w.value for w in words if w.letter == "M"}

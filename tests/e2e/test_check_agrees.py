@@ -15,6 +15,8 @@ from typing import Any
 
 import pytest
 
+from dthc_bridge.config import ControllerSettings
+from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.materials import MaterialStore
 from dthc_bridge.program.check import check_program
 from dthc_tools.demo import Stack, StackOptions
@@ -29,6 +31,8 @@ METRIC, INCH = "shop_material.cfg", "shop_material_inch.cfg"
 # codes its post writes for the torch.
 SHOP: dict[str, dict[str, Any]] = {
     "firecontrol_relay.nc": {"codes": {"M10": "M3", "M11": "M5"}},
+    "sheetcam_shop_m13_m15.nc": {"codes": {"M13": "M3", "M15": "M5"}},
+    "linuxcnc_material_change.ngc": {"library": METRIC},
     "plasmac_material_overcut.ngc": {"library": METRIC},
     "plasmac_pierce_only.ngc": {"library": INCH, "inch": True},
     "sheetcam_plasmac_inch.ngc": {"library": INCH, "inch": True},
@@ -47,9 +51,10 @@ async def test_what_check_program_calls_runnable_runs_on_the_machine(
         shutil.copyfile(PROGRAMS / shop["library"], library)
     inch = bool(shop.get("inch"))
     codes: dict[str, str] = shop.get("codes", {})
-    check = check_program(
+    check = check_program(  # as `dthc-bridge check-program` runs it, with the same options
         lines, codes=codes, inch_materials=inch,
         materials=MaterialStore(library).load() if library else None,
+        fallback_dialect=Dialect(ControllerSettings().dialect),
     )  # fmt: skip
     options = StackOptions(tmp_path, broker="mosquitto", materials_file=library,
                            controller={"materials_in_inches": inch})  # fmt: skip

@@ -4,12 +4,15 @@ every refusal quoting the whole line as written."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.materials import Material
 from dthc_bridge.program.check import check_program
 from dthc_bridge.program.plan import READABLE_PINS, detect_dialect
+from tests.controller.test_sequence import ready
 
 KERF_MATERIAL = Material(3, name="mild 3mm", kerf_width=1.2, pierce_height=3.8,
                          pierce_delay_s=0.4, cut_height=1.5, cut_speed=2400.0)  # fmt: skip
@@ -78,3 +81,46 @@ def test_the_relay_dialect_is_detected_only_when_the_program_handles_z_itself() 
     assert "handles Z itself" in why
     probe_only, _ = detect_dialect(["G21", "G38.2 Z-20 F100", "G0 Z3", "M3", "M5"])
     assert probe_only is not Dialect.RELAY
+
+
+TUBE = (Path(__file__).parents[1] / "programs" / "sheetcam_tube_plasmac.ngc").read_text()
+
+
+def test_a_tube_programs_temporary_material_with_only_a_pierce_delay_is_accepted() -> None:
+    """QtPlasmaC's filter: with #<tube-cut> = 1 an o=0 material may give only pd; pierce
+    height, cut height and feed are 0 (the program probes, sets Z and feeds itself). The
+    cut starts where the program put the torch, after the material's pierce delay."""
+    report = check_program(TUBE.splitlines())
+    assert report.ok, report.refused
+    cut = report.cuts[0]
+    assert (cut.sequence, cut.parameters) == ("relay", "program")
+    assert cut.pierce_delay_s == 0.5
+    assert cut.pierce_height_mm == 3.8  # its own G0 Z3.8
+    assert not report.warnings
+
+
+def test_without_tube_cut_a_material_without_its_heights_is_still_refused() -> None:
+    lines = [line for line in TUBE.splitlines() if "tube-cut" not in line]
+    refused = check_program(lines).refused[0]
+    assert refused["text"] == "(o=0, pd=0.5)"
+    assert "ph: required" in refused["error"]
+
+
+def test_a_tube_cut_waits_its_pierce_delay_before_xy_moves() -> None:
+    """On the closed loop: M3 is answered only after the arc transferred and pd passed."""
+    loop = ready()
+    defined = loop.complete(  # as the plan sends it: QtPlasmaC's defaults filled in
+        loop.service.execute_gcode("(o=0, pd=0.5, ph=0, ch=0, fr=0)", dialect=Dialect.PLASMAC)
+    )
+    assert defined.ok, defined.error
+    assert loop.gcode("G38.2 Z-50 F300").ok
+    assert loop.gcode("G92 Z-1.5").ok
+    assert loop.gcode("G0 Z3.8").ok
+    before = loop.now
+    reply = loop.m3()
+    assert reply.ok, reply.error
+    assert loop.sequence.cut is not None
+    assert loop.sequence.cut.relay
+    assert loop.sequence.cut.arc_ok_since is not None
+    assert loop.now - loop.sequence.cut.arc_ok_since >= 0.5  # the pierce delay, then M3
+    assert loop.now - before >= 0.5

@@ -56,9 +56,10 @@ PRINTED_DIGIT = 0.0001  # rs274 prints 4 decimals, in the program's units
 # Disagreements found with rs274 and reported, not yet fixed in the evaluator: name -> why.
 KNOWN_DISAGREEMENTS: dict[str, str] = {}
 
-# Words rs274 cannot read and that move no axis: a line holding one is taken out.
+# Words rs274 cannot read and that move no axis: a line holding one is taken out (M10/M11,
+# M13/M15: shops' own torch codes, mapped with --code).
 _TAKEN_OUT = re.compile(
-    r"\b(?:M\s*0*190|M\s*0*66[67]|M\s*0*1[01]|G\s*0*100|G\s*0*200|G\s*0*31|H\s*[01])(?![\d.])",
+    r"\b(?:M\s*0*190|M\s*0*66[67]|M\s*0*1[0135]|G\s*0*100|G\s*0*200|G\s*0*31|H\s*[01])(?![\d.])",
     re.IGNORECASE,
 )
 _HAL_READ = re.compile(r"#<\s*_hal\[[^\]]*\]\s*>", re.IGNORECASE)
