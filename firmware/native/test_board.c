@@ -164,22 +164,24 @@ static uint8_t z_move(int32_t target_um, uint32_t feed_um_s)
     return send(DTHC_MSG_Z_MOVE, p, 8);
 }
 
-static uint8_t z_probe(uint32_t feed, uint32_t travel, uint16_t sensors)
+/* Z_PROBE and Z_PROBE_AWAY share their payload: feed, travel, sensor set. */
+static uint8_t probe_msg(uint8_t type, uint32_t feed, uint32_t travel, uint16_t sensors)
 {
     uint8_t p[10];
     dthc_put_u32(p, feed);
     dthc_put_u32(p + 4, travel);
     dthc_put_u16(p + 8, sensors);
-    return send(DTHC_MSG_Z_PROBE, p, 10);
+    return send(type, p, 10);
+}
+
+static uint8_t z_probe(uint32_t feed, uint32_t travel, uint16_t sensors)
+{
+    return probe_msg(DTHC_MSG_Z_PROBE, feed, travel, sensors);
 }
 
 static uint8_t z_probe_away(uint32_t feed, uint32_t travel, uint16_t sensors)
 {
-    uint8_t p[10];
-    dthc_put_u32(p, feed);
-    dthc_put_u32(p + 4, travel);
-    dthc_put_u16(p + 8, sensors);
-    return send(DTHC_MSG_Z_PROBE_AWAY, p, 10);
+    return probe_msg(DTHC_MSG_Z_PROBE_AWAY, feed, travel, sensors);
 }
 
 static void z_velocity(uint16_t stream_seq, int32_t v, uint16_t expiry_ms)
