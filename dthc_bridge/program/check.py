@@ -33,10 +33,19 @@ from ..controller.commands import (
 from ..controller.dialect import Dialect
 from ..controller.gcode import parse_line
 from ..controller.plasma import PlasmaController, default_material
-from ..controller.words import cutting_feed_mm_min, tokenize
+from ..controller.words import cutting_feed_mm_min
 from ..materials import Material, MaterialError, MaterialStore
 from .options import add_daemon_options, add_dialect_options
-from .plan import DaemonStep, DwellStep, MotionStep, ProgramPlan, Refused, detect_dialect
+from .plan import (
+    DaemonStep,
+    DwellStep,
+    MotionStep,
+    ProgramPlan,
+    Refused,
+    Step,
+    detect_dialect,
+    unknown_m_codes,
+)
 from .xypath import PathTracer, path_entries
 
 __all__ = ["CheckReport", "CutReport", "add_arguments", "check_program", "run_from_args"]
@@ -243,14 +252,12 @@ def check_program(
     controller.sequence.plasma_mode = plasma_mode_at_start
     plan.note_pins(controller.begin_program())
     model = _Model(plan, controller)
-    motion_m: dict[float, tuple[int, str]] = {}  # M codes sent to motion: first line of each
+    motions: list[Step] = []  # for the M codes a cut-less program holds
     tracer = PathTracer(plan)
     for index, step in enumerate(plan.steps()):
         tracer.step(index, step)
         if isinstance(step, MotionStep):
-            for word in tokenize(step.line).words:
-                if word.letter == "M":
-                    motion_m.setdefault(word.value, (step.source_line, step.line))
+            motions.append(step)
         if isinstance(step, Refused):
             report.refuse(step.source_line, step.text, step.error)
             continue
@@ -263,7 +270,8 @@ def check_program(
         except CommandError as exc:
             report.refuse(step.source_line, step.text, str(exc))
     if not report.cuts and not report.refused:
-        _unknown_m_codes(motion_m, report)
+        for refused in unknown_m_codes(motions):
+            report.refuse(refused.source_line, refused.text, refused.error)
     if not report.cuts and not report.refused:
         report.warnings.append(
             f"no cut found: no torch start ({_STARTS[Dialect(report.dialect)]}) in the "
@@ -278,30 +286,6 @@ def check_program(
     report.warnings.extend(plan.warnings)
     report.path = path_entries(tracer.segments)
     return report
-
-
-# M codes a motion controller runs itself (RS274NGC, LinuxCNC's user M100-M199): program
-# flow, tool change, coolant, overrides, modal state.
-MOTION_M_CODES = frozenset(
-    {0.0, 1.0, 2.0, 30.0, 60.0, 6.0, 7.0, 8.0, 9.0, 4.0, 48.0, 49.0, 50.0, 51.0, 52.0, 53.0,
-     61.0, 70.0, 71.0, 72.0, 73.0, *(float(n) for n in range(100, 200))}
-)  # fmt: skip
-
-
-def _unknown_m_codes(codes: Mapping[float, tuple[int, str]], report: CheckReport) -> None:
-    """A program without a cut whose M codes neither the daemon nor a motion controller
-    knows (a shop's SheetCam post switching the torch with M13/M15): not OK. Each is refused
-    at its first line, with the --code mapping that would make it a torch start and stop."""
-    unknown = [(f"M{code:g}", where) for code, where in codes.items()
-               if code not in MOTION_M_CODES]  # fmt: skip
-    if not unknown:
-        return
-    names = [name for name, _ in unknown]
-    hint = (f"--code {names[0]}=M3 --code {names[1]}=M5" if len(names) >= 2
-            else f"--code {names[0]}=M3")  # fmt: skip
-    for name, (line, text) in unknown:
-        report.refuse(line, text, f"{name}: not a code the daemon knows, and the program has "
-                      f"no cut: if these switch the torch, map them ({hint})")  # fmt: skip
 
 
 # --------------------------------------------------------------------------- command line

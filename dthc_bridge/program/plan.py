@@ -140,6 +140,37 @@ def detect_dialect(
     return dialect, f"nothing dialect-specific found: {why}"
 
 
+# M codes a motion controller runs itself (RS274NGC, LinuxCNC's user M100-M199): program
+# flow, tool change, coolant, overrides, modal state.
+MOTION_M_CODES = frozenset(
+    {0.0, 1.0, 2.0, 30.0, 60.0, 6.0, 7.0, 8.0, 9.0, 4.0, 48.0, 49.0, 50.0, 51.0, 52.0, 53.0,
+     61.0, 70.0, 71.0, 72.0, 73.0, *(float(n) for n in range(100, 200))}
+)  # fmt: skip
+
+
+def unknown_m_codes(steps: Sequence[Step]) -> list[Refused]:
+    """For a program that plans no cut: the M codes neither the daemon nor a motion
+    controller knows (a shop's post switching the torch with M13/M15), each refused at its
+    first line with the --code mapping that would make them a torch start and stop. The
+    check and the sender refuse such a program alike (a cut-less run is not "OK")."""
+    first: dict[float, MotionStep] = {}
+    for step in steps:
+        if isinstance(step, MotionStep):
+            for word in tokenize(step.line).words:
+                if word.letter == "M" and word.value not in MOTION_M_CODES:
+                    first.setdefault(word.value, step)
+    names = [f"M{code:g}" for code in first]
+    if not names:
+        return []
+    hint = (f"--code {names[0]}=M3 --code {names[1]}=M5" if len(names) >= 2
+            else f"--code {names[0]}=M3")  # fmt: skip
+    return [
+        Refused(step.source_line, step.line.strip(), f"{name}: not a code the daemon knows, "
+                f"and the program has no cut: if these switch the torch, map them ({hint})")
+        for name, step in zip(names, first.values(), strict=True)
+    ]  # fmt: skip
+
+
 def parse_code_map(pairs: Sequence[str]) -> dict[str, str]:
     """``["H1=M667", "H0=M666"]`` → ``{"H1": "M667", "H0": "M666"}``; errors name the pair."""
     codes: dict[str, str] = {}

@@ -37,6 +37,7 @@ from dthc_bridge.program.plan import (
     Refused,
     Step,
     detect_dialect,
+    unknown_m_codes,
 )
 
 from .backend import BackendError, MotionBackend, Positioned
@@ -377,6 +378,10 @@ class Sender:
         listed = list(ahead.steps())
         self.progress.total_cuts = sum(_cuts_in(step, ahead) for step in listed)
         self.path = build_path(ahead, listed)
+        unknown = unknown_m_codes(listed) if not self.progress.total_cuts else []
+        if unknown:  # as check-program: codes nobody knows and no cut is not a program run
+            report.error, report.error_line = unknown[0].error, unknown[0].source_line
+            return report
         plan = ProgramPlan(lines, dialect, table)
         self._note_cut_feed(started, plan)
         number = start_line

@@ -185,3 +185,15 @@ async def test_a_hold_from_the_controllers_own_button_is_a_pause_that_ends_the_c
     assert console.operator_stop
     await console.press("q")
     await asyncio.wait_for(job, 5.0)
+
+
+async def test_a_program_with_no_cut_and_codes_nobody_knows_is_refused_before_it_moves() -> None:
+    """As check-program: a shop's M10/M11 torch codes unmapped would run the motion with
+    the torch never lit; the sender names them and the --code mapping instead."""
+    backend = FakeBackend()
+    sender = Sender(cast(DaemonClient, FakeDaemon()), backend)
+    report = await sender.run(["G21", "G0 X1", "M10", "G1 X5 F100", "M11"], dialect=Dialect.RELAY)
+    assert report.error_line == 3
+    assert report.error.startswith("M10: not a code the daemon knows")
+    assert "--code M10=M3 --code M11=M5" in report.error
+    assert backend.queued == []  # nothing moved
