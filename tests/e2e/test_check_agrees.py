@@ -25,7 +25,10 @@ from dthc_tools.demo.summary import summarize
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
 PROGRAMS = Path(__file__).parents[1] / "programs"
-NAMES = sorted(p.name for p in PROGRAMS.iterdir() if p.suffix in (".nc", ".ngc"))
+# The .nc programs here (grbl, MASSO, FireControl forms), the .ngc ones (PlasmaC, RosettaCNC)
+# in test_check_agrees_ngc.py: two files, so the two test workers share the runs.
+NAMES = sorted(p.name for p in PROGRAMS.iterdir() if p.suffix == ".nc")
+NGC_NAMES = sorted(p.name for p in PROGRAMS.iterdir() if p.suffix == ".ngc")
 METRIC, INCH = "shop_material.cfg", "shop_material_inch.cfg"
 # What the shop gives with each program: its library (and whether it is in inches), the
 # codes its post writes for the torch.
@@ -39,10 +42,48 @@ SHOP: dict[str, dict[str, Any]] = {
 }
 
 
+def _material_change(summary: dict[str, Any]) -> None:
+    """M190 from the library, its feed through F#<_hal[...]>, then a magic-comment material;
+    the hole ends with the torch disabled (M62 P3) while motion goes on."""
+    cuts = summary["cuts"]
+    assert summary["height_rms_mm"] < 0.2
+    assert 11.5 < cuts[0]["arc_on_s"] < 14.0  # the library's 3000 mm/min: 600 mm in ~12 s
+    assert cuts[1]["arc_on_s"] < 4.0  # the over-cut ran with the torch off
+
+
+def _inch_library(summary: dict[str, Any]) -> None:
+    """G20 beside G92.1, an inch library (M190 P2), the feed read from it: the machine runs
+    inches at the material's feed, so the THC takes its target and works."""
+    cut = summary["cuts"][0]
+    assert 10.0 < cut["arc_on_s"] < 14.0  # 14 in at 80 in/min; run in mm it would crawl
+    assert cut["target_v"] == 128.0  # CUT_VOLTS of material 2
+    assert cut["thc_active_s"] > 5.0  # at speed, so not held by anti-dive
+
+
+def _relay(summary: dict[str, Any]) -> None:
+    """grbl-style: G38.2 by the board, G92 Z, its own Z moves and dwell, M3 a bare relay,
+    FireControl's H1/H0 switching the THC."""
+    assert summary["height_rms_mm"] < 0.1
+    assert summary["cuts"][0]["thc_active_s"] > 1.0  # H1 switched the THC on
+
+
+# What a program's own run shows beyond agreeing (each was its own end-to-end test).
+DETAILS = {
+    "plasmac_material_overcut.ngc": _material_change,
+    "sheetcam_plasmac_inch.ngc": _inch_library,
+    "relay_self_probe.nc": _relay,
+}
+
+
 @pytest.mark.parametrize("name", NAMES)
 async def test_what_check_program_calls_runnable_runs_on_the_machine(
     name: str, tmp_path: Path
 ) -> None:
+    await agrees(name, tmp_path)
+
+
+async def agrees(name: str, tmp_path: Path) -> None:
+    """tests/programs/``name``: checked, then run on the stack with the same options."""
     shop = SHOP.get(name, {})
     lines = (PROGRAMS / name).read_text(encoding="utf-8").splitlines()
     library = None
@@ -81,3 +122,6 @@ async def test_what_check_program_calls_runnable_runs_on_the_machine(
     assert len(cuts) == len(check.cuts)  # each cut it listed burned, one row each
     assert all(cut["arc_on_s"] > 0 for cut in cuts)
     assert summary["torch_on_at_exit"] is False
+    assert summary["daemon_exit_code"] == 0
+    if name in DETAILS:
+        DETAILS[name](summary)

@@ -1,0 +1,19 @@
+"""check-program and the machine agree on the .ngc programs in tests/programs (PlasmaC and
+RosettaCNC forms): see test_check_agrees.py, which runs the .nc ones."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from .test_check_agrees import NGC_NAMES, agrees
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
+
+
+@pytest.mark.parametrize("name", NGC_NAMES)
+async def test_what_check_program_calls_runnable_runs_on_the_machine(
+    name: str, tmp_path: Path
+) -> None:
+    await agrees(name, tmp_path)
