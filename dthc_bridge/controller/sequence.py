@@ -403,19 +403,11 @@ class CutSequence:
         if cut is not None and self.state is State.CUTTING:
             self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
         self.probe_required = True
-        self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0), act.SwitchOhmicSense(False))
-        if cut is not None and not math.isnan(cut.zero_mm):
-            self._update_safe_z()
-        self._reply(False, f"paused: {reason}")
         self._enter(State.TO_SAFE)
-        self._move(self._raised_z(), self.config.setup_speed_mm_s)
+        self._torch_out_and_raise()
+        self._reply(False, f"paused: {reason}")
         self._emit(act.PauseProgram(reason, act.PauseCause.OPERATOR))
         return True
-
-    def _raised_z(self) -> float:
-        """Safe height, or where Z is if higher, below the top margin."""
-        z = self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm
-        return min(max(self.safe_z_mm, z), self.config.z_max_mm - self.config.top_margin_mm)
 
     def probe_test(self, now: float) -> str | None:
         """The operator's probe test, idle: touch off where the torch stands (the cut's
@@ -1105,16 +1097,19 @@ class CutSequence:
         self.error = reason
         self.probe_required = True
         self._enter(State.FAULTED)
+        self._torch_out_and_raise()
+        self._emit(act.PauseProgram(reason, cause))
+        self._reply(False, reason)
+
+    def _torch_out_and_raise(self) -> None:
+        """Torch and ohmic sensing off and Z held at once, then up to safe height (or where
+        Z is, if higher, below the top margin): the fault path's and a pause's."""
         self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0), act.SwitchOhmicSense(False))
         if self.cut is not None and not math.isnan(self.cut.zero_mm):
             self._update_safe_z()
-        target = max(self.safe_z_mm, self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm)
-        self._move(
-            min(target, self.config.z_max_mm - self.config.top_margin_mm),
-            self.config.setup_speed_mm_s,
-        )
-        self._emit(act.PauseProgram(reason, cause))
-        self._reply(False, reason)
+        z = self._z_mm if not math.isnan(self._z_mm) else self.safe_z_mm
+        top = self.config.z_max_mm - self.config.top_margin_mm
+        self._move(min(max(self.safe_z_mm, z), top), self.config.setup_speed_mm_s)
 
 
 def with_board_limits(config: SequenceConfig, z_min_mm: float, z_max_mm: float) -> SequenceConfig:
