@@ -86,13 +86,9 @@ async def check_lease_expiry(ctx: SuiteContext) -> list[CheckResult]:
             "of the last host frame"
         )
     else:
-        fault_us = extend_u32(fault.t_us, t_last) - t_last
+        fault_us, late = _late(fault, t_last, limit_us, "LEASE_EXPIRED", opts.lease_ms)
         values.update(fault_after_ms=fault_us / 1e3, detail=fault.detail)
-        if fault_us > limit_us + LEASE_TOLERANCE_US:
-            problems.append(
-                f"LEASE_EXPIRED {fault_us / 1e3:.1f} ms after the last host frame, limit "
-                f"{opts.lease_ms} + {period_us / 1e3:g} ms"
-            )
+        problems += late
         if fault.detail != fp.LEASE_DETAIL_LATCHED:
             problems.append(
                 f"LEASE_EXPIRED with {names} on reported detail {fault.detail} (an idle lapse), "
@@ -237,15 +233,11 @@ async def check_lease_idle_lapse(ctx: SuiteContext) -> list[CheckResult]:
             "of the last host frame with nothing lit and Z at rest"
         )
     else:
-        lapse_us = extend_u32(lapse.t_us, t_last) - t_last
+        lapse_us, late = _late(lapse, t_last, limit_us, "idle lapse reported", opts.lease_ms)
         values.update(
             lapse_after_ms=lapse_us / 1e3, detail=lapse.detail, faults=f"0x{lapse.faults:04x}"
         )
-        if lapse_us > limit_us + LEASE_TOLERANCE_US:
-            problems.append(
-                f"idle lapse reported {lapse_us / 1e3:.1f} ms after the last host frame, limit "
-                f"{opts.lease_ms} + {period_us / 1e3:g} ms"
-            )
+        problems += late
     latched = lapse is not None and (
         lapse.detail != fp.LEASE_DETAIL_IDLE or lapse.faults & (1 << FaultCode.LEASE_EXPIRED)
     )
@@ -321,3 +313,18 @@ async def _idle_silence(ctx: SuiteContext, watch_s: float) -> tuple[int, fp.Faul
     reports = [m for m in link.messages(fp.Fault, since=mark) if _is_lease_fault(m)]
     period_us = _period_us(ctx, link.messages(fp.Samples, since=mark))
     return t_last, (found[1] if found is not None else None), len(reports), period_us
+
+
+def _late(
+    fault: fp.Fault, t_last: int, limit_us: int, what: str, lease_ms: int
+) -> tuple[int, list[str]]:
+    """How long after the host's last frame (board µs) the lease's FAULT came, and the
+    problem when that is past lease + one sample period (``limit_us``, with tolerance)."""
+    after_us = extend_u32(fault.t_us, t_last) - t_last
+    if after_us <= limit_us + LEASE_TOLERANCE_US:
+        return after_us, []
+    period_ms = (limit_us - lease_ms * 1000) / 1e3
+    return after_us, [
+        f"{what} {after_us / 1e3:.1f} ms after the last host frame, limit {lease_ms} + "
+        f"{period_ms:g} ms"
+    ]
