@@ -271,17 +271,6 @@ class ProgramPlan:
     def pierce_only(self) -> bool:
         return bool(self.parameter("pierce-only"))
 
-    @property
-    def cut_feed_mm_min(self) -> float | None:
-        return self.pins_mm.get(CUT_FEED_PIN)
-
-    @cut_feed_mm_min.setter
-    def cut_feed_mm_min(self, value: float | None) -> None:
-        if value is None:
-            self.pins_mm.pop(CUT_FEED_PIN, None)
-        else:
-            self.pins_mm[CUT_FEED_PIN] = value
-
     def note_pins(self, answer: Mapping[str, object]) -> None:
         """The daemon's answer to program_start or M190: the pins it gives (in mm)."""
         pins = answer.get("pins")
@@ -289,8 +278,8 @@ class ProgramPlan:
             for pin, value in pins.items():
                 if pin in READABLE_PINS and isinstance(value, int | float):
                     self.pins_mm[pin] = float(value)
-        elif isinstance(answer.get("cut_feed_mm_min"), int | float):  # an older daemon
-            self.cut_feed_mm_min = float(answer["cut_feed_mm_min"])  # type: ignore[arg-type]
+        elif isinstance(feed := answer.get("cut_feed_mm_min"), int | float):  # an older daemon
+            self.pins_mm[CUT_FEED_PIN] = float(feed)
 
     def _hal(self, pin: str) -> float:
         if pin not in READABLE_PINS:

@@ -383,7 +383,7 @@ class Sender:
             report.error, report.error_line = unknown[0].error, unknown[0].source_line
             return report
         plan = ProgramPlan(lines, dialect, table)
-        self._note_cut_feed(started, plan)
+        plan.note_pins(started)  # the HAL pins the material in force answers
         number = start_line
         restart = RestartPosition()
         resumed = _Resumption(self.path, resume) if resume is not None else None
@@ -538,11 +538,6 @@ class Sender:
             return
         await self._daemon_line(step, plan, report)
 
-    @staticmethod
-    def _note_cut_feed(data: Mapping[str, Any], plan: ProgramPlan) -> None:
-        """The material in force changed (program start, M190): the HAL pins it reads."""
-        plan.note_pins(data)
-
     async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
         parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
         xy = await self._wait_motion()
@@ -560,7 +555,7 @@ class Sender:
             )
         finally:
             self._at_line = None
-        self._note_cut_feed(data, plan)
+        plan.note_pins(data)  # an M190 changed them
         report.lines_sent += 1
         report.plasma_commands += len(parsed.commands)
         for command in parsed.commands:
