@@ -197,3 +197,27 @@ async def test_a_program_with_no_cut_and_codes_nobody_knows_is_refused_before_it
     assert report.error.startswith("M10: not a code the daemon knows")
     assert "--code M10=M3 --code M11=M5" in report.error
     assert backend.queued == []  # nothing moved
+
+
+async def test_the_rearm_key_rearms_the_daemon_and_is_refused_while_a_program_runs() -> None:
+    daemon = CuttingDaemon()
+    sender = Sender(cast(DaemonClient, daemon), FakeBackend())
+    console = OperatorConsole(sender, out=io.StringIO(), interactive=False)
+    await console.press("a")
+    assert ("rearm", {}) in daemon.args
+    assert console.messages == ["re-armed"]
+    sender.progress.running = True
+    await console.press("a")
+    assert daemon.args.count(("rearm", {})) == 1
+    assert "a program is running or paused" in console.messages[-1]
+
+
+async def test_at_the_end_the_line_is_the_files_last_and_the_count_is_the_files() -> None:
+    """The console's line n/N: N is the file's line count (comments and blanks included)
+    and a finished program stands at N, not at the last line that moved."""
+    program = [*PROGRAM, "", "(end of the job)"]
+    sender = Sender(cast(DaemonClient, CuttingDaemon()), FakeBackend())
+    report = await sender.run(program, dialect=Dialect.MASSO)
+    assert report.ok, report.error
+    assert sender.progress.total_lines == len(program) == 11
+    assert sender.progress.line == 11
