@@ -13,13 +13,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import signal
+from collections.abc import Awaitable, Callable
 
 import structlog
 
 import firmware_protocol as fp
 
 from .board import BoardClient
-from .config import ControllerConfigs, DaemonConfig
+from .config import ControllerConfigs, ControllerSettings, DaemonConfig
 from .consumables import ConsumableLog, default_consumables_file
 from .controller.dialect import Dialect
 from .controller.plasma import PlasmaController, default_material
@@ -32,17 +33,48 @@ from .mqtt.broker import BrokerRefused
 from .mqtt.gateway import MqttGateway
 from .service import ControllerService
 
-__all__ = ["build_controller", "build_service", "run_daemon"]
+__all__ = ["build_controller", "build_service", "controller_service", "run_daemon"]
 
 log = structlog.get_logger("dthc_bridge.daemon")
 
 
-def build_controller(configs: ControllerConfigs) -> PlasmaController:
-    """The pure controller (cut sequence, THC, mode) from its configuration: the daemon
-    runs it, and so does the closed-loop simulation the benchmarks measure."""
+def build_controller(
+    settings: ControllerSettings, configs: ControllerConfigs | None = None
+) -> tuple[PlasmaController, MaterialStore | None]:
+    """The pure controller (cut sequence, THC, mode, plasma mode at start, materials) and
+    its material store, from the ``[controller]`` settings: the daemon runs it, and so do
+    the closed-loop simulation the benchmarks measure and the simulated program runs.
+    ``configs``: the sequence/THC/mode to use instead of the settings' own (a bench's)."""
+    configs = configs or settings.configs()
     sequence = CutSequence(configs.sequence, ThcController(configs.thc))
     sequence.mode = configs.mode
-    return PlasmaController(sequence)
+    controller = PlasmaController(sequence)
+    controller.plasma_only = settings.plasma_mode_at_start
+    sequence.plasma_mode = settings.plasma_mode_at_start
+    controller.default_material = default_material(settings.default_cut_feed_mm_min)
+    controller.inch_materials = settings.materials_in_inches
+    store = None if settings.materials_file is None else MaterialStore(settings.materials_file)
+    controller.set_library(store.load() if store is not None else {})
+    return controller, store
+
+
+def controller_service(
+    settings: ControllerSettings,
+    supervisor: LinkSupervisor,
+    client: BoardClient,
+    *,
+    configs: ControllerConfigs | None = None,
+    consumables: ConsumableLog,
+    command_timeout_s: float,
+    board_setup: Callable[[BoardClient], Awaitable[None]] | None = None,
+) -> ControllerService:
+    """The controller service over a board link, as ``[controller]`` says."""
+    controller, store = build_controller(settings, configs)
+    return ControllerService(
+        controller, supervisor, client, board_setup=board_setup,
+        command_timeout_s=command_timeout_s, dialect=Dialect(settings.dialect),
+        materials=store, codes=settings.codes, consumables=consumables,
+    )  # fmt: skip
 
 
 def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
@@ -63,18 +95,10 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
         )
 
     settings = config.controller
-    controller = build_controller(settings.configs())
-    controller.plasma_only = settings.plasma_mode_at_start
-    controller.sequence.plasma_mode = settings.plasma_mode_at_start
-    controller.default_material = default_material(settings.default_cut_feed_mm_min)
-    controller.inch_materials = settings.materials_in_inches
-    store = None if settings.materials_file is None else MaterialStore(settings.materials_file)
-    controller.set_library(store.load() if store is not None else {})
-    service = ControllerService(
-        controller, supervisor, client, board_setup=setup,
+    service = controller_service(
+        settings, supervisor, client, board_setup=setup,
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
-        dialect=Dialect(settings.dialect), materials=store, codes=settings.codes,
         consumables=ConsumableLog(settings.consumables_file or default_consumables_file()),
     )  # fmt: skip
     return supervisor, service

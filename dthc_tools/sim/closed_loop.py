@@ -1,8 +1,8 @@
 """The daemon's controller service, closing the loop over a simulated board in simulated time.
 
 Not a model of the daemon: the daemon itself. A ``ControllerService`` built as ``dthc-bridge
-run`` builds it (``daemon.build_controller`` on the daemon's own defaults,
-``config.default_controller_configs``), with its ``LinkSupervisor`` and ``BoardClient``,
+run`` builds it (``daemon.controller_service`` on the daemon's own ``[controller]``
+defaults unless given others), with its ``LinkSupervisor`` and ``BoardClient``,
 talks the wire protocol to a
 :class:`~mock_device.sim.SimulatedBoard` over :class:`~.link.SimulatedLink`. So the
 actions-to-protocol and reports-to-sequence mappings the benchmarks measure are the
@@ -32,14 +32,15 @@ from typing import Any, TypeVar
 import looptime
 
 from dthc_bridge.board import BoardClient
-from dthc_bridge.config import BoardSettings, default_controller_configs
+from dthc_bridge.config import BoardSettings, ControllerSettings
+from dthc_bridge.consumables import ConsumableLog
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State
 from dthc_bridge.controller.thc import ThcConfig
-from dthc_bridge.daemon import build_controller
+from dthc_bridge.daemon import controller_service
 from dthc_bridge.events import ArcLost, ControllerEvent, ProgramPaused
 from dthc_bridge.link import LinkSupervisor
 from dthc_bridge.mqtt.port import CommandResult
-from dthc_bridge.service import ControllerService
+from dthc_bridge.mqtt.settings import MqttSettings
 from dthc_bridge.transport import BytesCallback, LostCallback, Transport
 from mock_device.sim import SimulatedBoard
 
@@ -81,6 +82,7 @@ class _Runtime:
         self.replies: list[Reply] = []
         self.pauses: list[str] = []
         self.events: list[ControllerEvent] = []
+        self.holds_on_pause = True  # the harness is the sender (not a real one's)
 
     async def open_link(self, on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
         self.link = SimulatedLink(self.board, on_bytes, on_lost, record_velocities=True)
@@ -90,7 +92,8 @@ class _Runtime:
         self.events.append(event)
         if isinstance(event, ArcLost | ProgramPaused):
             self.pauses.append(event.reason)
-            self.board.plant.gantry.hold()  # what the sender does with a pause
+            if self.holds_on_pause:
+                self.board.plant.gantry.hold()  # what the sender does with a pause
 
     def note_reply(self, what: str, task: asyncio.Task[CommandResult]) -> None:
         if task.cancelled():
@@ -136,7 +139,12 @@ class ClosedLoop:
         config: SequenceConfig | None = None,
         thc: ThcConfig | None = None,
         board: SimulatedBoard | None = None,
+        settings: ControllerSettings | None = None,
+        holds_on_pause: bool = True,
     ) -> None:
+        # The daemon's [controller] section (its defaults unless given): plasma mode at
+        # start, dialect, codes, material library, as ``dthc-bridge run`` applies them.
+        self.settings = settings or ControllerSettings()
         self.board = board or SimulatedBoard(scenario, seed=seed)
         self.plant = self.board.plant
         self.trace = Trace()
@@ -145,6 +153,8 @@ class ClosedLoop:
         # machine, not the reference).
         self.reported_feed_mm_min: float | None = None
         self._runtime = _Runtime(self.board)
+        # False where a real sender drives the gantry and holds it itself (.program).
+        self._runtime.holds_on_pause = holds_on_pause
         self.replies = self._runtime.replies
         self.pauses = self._runtime.pauses
         self.events = self._runtime.events
@@ -155,16 +165,18 @@ class ClosedLoop:
 
     async def _start(self, config: SequenceConfig | None, thc: ThcConfig | None) -> None:
         # The daemon's own defaults (no file, no environment), where the caller names none.
-        configs = default_controller_configs()
-        controller = build_controller(
-            configs._replace(sequence=config or configs.sequence, thc=thc or configs.thc)
-        )
+        configs = self.settings.configs()
         runtime = self._runtime
         self.supervisor = LinkSupervisor(
             "sim://board", BoardSettings().timing(), opener=runtime.open_link
         )
         self.client = BoardClient(self.supervisor)
-        self.service = ControllerService(controller, self.supervisor, self.client)
+        self.service = controller_service(
+            self.settings, self.supervisor, self.client,
+            configs=configs._replace(sequence=config or configs.sequence, thc=thc or configs.thc),
+            consumables=ConsumableLog(None),  # counted, never written to an owner's file
+            command_timeout_s=MqttSettings().request_deadline_s + 5.0,
+        )  # fmt: skip
         self.service.add_event_listener(runtime.on_event)
         loop = asyncio.get_running_loop()
         self._runtime.tasks += [

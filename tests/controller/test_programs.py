@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from dthc_bridge.config import ControllerSettings
 from dthc_bridge.controller.commands import CommandError
 from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.controller.plasma import PlasmaController
@@ -97,8 +98,9 @@ def test_plasmac_thc_and_velocity_reduction_lines() -> None:
 
 
 def test_refusals_change_nothing() -> None:
-    """Leaving plasma mode mid-cut, or re-arming with nothing to re-arm, is refused cleanly."""
-    loop = ClosedLoop("flat_clean", seed=5)
+    """Leaving plasma mode mid-cut (a table with other tools), or re-arming with nothing to
+    re-arm, is refused cleanly."""
+    loop = ClosedLoop("flat_clean", seed=5, settings=ControllerSettings(plasma_mode_at_start=False))
     controller = loop.service.controller
     for line in ("T112 M6", "G200 F300 P3.8 D300 C1.5 V125 A90 O1 S0"):
         for command in parse_line(line).commands:

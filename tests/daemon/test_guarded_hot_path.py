@@ -22,7 +22,7 @@ import structlog
 
 import firmware_protocol as fp
 from dthc_bridge.board import BoardClient
-from dthc_bridge.config import default_controller_configs
+from dthc_bridge.config import ControllerSettings, default_controller_configs
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.controller.thc import ThcController
 from dthc_bridge.daemon import build_controller
@@ -92,7 +92,7 @@ async def test_a_controller_that_raises_mid_cut_faults_the_cut_and_keeps_the_lin
     through the fault path within a batch or two, the board's torch is off, and the link
     is still up on its first session."""
     configs = default_controller_configs()
-    controller = build_controller(configs)
+    controller, _ = build_controller(ControllerSettings())
     thc = BuggyThc(configs.thc)
     controller.sequence.thc = thc
     supervisor = LinkSupervisor(board.url, TIMING)
