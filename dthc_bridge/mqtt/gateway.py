@@ -50,7 +50,7 @@ from .settings import MqttSettings
 from .topics import REQUEST_NAME, topic_error
 from .transactions import TransactionCache
 
-__all__ = ["GatewayStats", "MqttGateway"]
+__all__ = ["GatewayStats", "MqttGateway", "execute"]
 
 log = structlog.get_logger("dthc_bridge.mqtt")
 
@@ -409,7 +409,7 @@ class MqttGateway:
         try:
             async with scope, self._slots:
                 started = True
-                result = await self._execute(reply.name, request)
+                result = await execute(self.controller, reply.name, request)
         except TimeoutError as exc:
             if not scope.expired():
                 result = _internal_error(reply.name, exc)
@@ -434,16 +434,6 @@ class MqttGateway:
             now_s = asyncio.get_running_loop().time()
             for waiting in self._transactions.finish(reply.name, reply.transaction, result, now_s):
                 self._respond(waiting, result)
-
-    async def _execute(self, name: str, request: GcodeRequest | Request) -> CommandResult:
-        if isinstance(request, GcodeRequest):
-            return await self.controller.execute_gcode(
-                request.line,
-                line_number=request.line_number,
-                xy_mm=request.xy_mm,
-                dialect=None if request.dialect is None else Dialect(request.dialect),
-            )
-        return await self.controller.execute_request(name, request.args)
 
     def _respond(self, reply: _Reply, result: CommandResult) -> None:
         payload = response_payload(result, reply.transaction)
@@ -653,6 +643,21 @@ class MqttGateway:
             task.cancel()
         if pending:
             await asyncio.wait(pending)
+
+
+async def execute(
+    controller: ControllerPort, name: str, request: GcodeRequest | Request
+) -> CommandResult:
+    """A decoded request, run by the controller (the gateway's, and the simulated program
+    runs' in-process daemon: one mapping from request to controller call)."""
+    if isinstance(request, GcodeRequest):
+        return await controller.execute_gcode(
+            request.line,
+            line_number=request.line_number,
+            xy_mm=request.xy_mm,
+            dialect=None if request.dialect is None else Dialect(request.dialect),
+        )
+    return await controller.execute_request(name, request.args)
 
 
 def _codes(granted: object) -> list[object]:

@@ -10,7 +10,7 @@ import json
 import random
 import uuid
 from collections.abc import AsyncIterator, Callable, Coroutine
-from typing import Any
+from typing import Any, Protocol
 
 import aiomqtt
 import structlog
@@ -19,7 +19,9 @@ from dthc_bridge.backoff import backoff_delay_s
 from dthc_bridge.mqtt.broker import BrokerSettings
 from dthc_bridge.mqtt.cancellation import honour_cancellation
 
-__all__ = ["INVALID", "DaemonClient", "DaemonError"]
+__all__ = [
+    "INVALID", "DaemonClient", "DaemonError", "DaemonSeam", "gcode_args", "response_data",
+]  # fmt: skip
 
 log = structlog.get_logger("dthc_tools.sender")
 
@@ -33,6 +35,34 @@ daemon's death: a broker shutting down sends the daemon's will, then drops us in
 
 class DaemonError(Exception):
     """The daemon answered with an error, or did not answer in time."""
+
+
+class DaemonSeam(Protocol):
+    """What the sender needs of the daemon: :class:`DaemonClient` over MQTT, or the
+    daemon's controller service in the same process (``dthc_tools.sim.program``)."""
+
+    def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None: ...
+
+    def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None: ...
+
+    def on_offline(self, handler: Callable[[], None]) -> None: ...
+
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
+        """The response's data; DaemonError on an error response."""
+        ...
+
+    async def notify(self, name: str, /, **args: Any) -> None:
+        """A report whose answer is not awaited."""
+        ...
+
+    async def gcode(
+        self,
+        line: str,
+        *,
+        line_number: int | None = None,
+        xy: tuple[float, float] | None = None,
+        dialect: str | None = None,
+    ) -> dict[str, Any]: ...
 
 
 class DaemonClient:
@@ -323,7 +353,7 @@ class DaemonClient:
         finally:
             self._waiting.pop(transaction, None)
             self._unanswered.pop(transaction, None)
-        return _data(response)
+        return response_data(response)
 
     async def request_to(self, role: str, name: str, /, **args: Any) -> dict[str, Any]:
         """A request to another client of the board (``sender``): published once, answered
@@ -344,7 +374,7 @@ class DaemonClient:
             raise DaemonError(f"{name}: {exc}") from None
         finally:
             self._waiting.pop(transaction, None)
-        return _data(response)
+        return response_data(response)
 
     def _expect_answer(self) -> tuple[str, asyncio.Future[dict[str, Any]]]:
         """A new transaction, unique to this run, and the future its response resolves."""
@@ -372,17 +402,24 @@ class DaemonClient:
         xy: tuple[float, float] | None = None,
         dialect: str | None = None,
     ) -> dict[str, Any]:
-        args: dict[str, Any] = {"line": line}
-        if dialect is not None:
-            args["dialect"] = dialect
-        if line_number is not None:
-            args["line_number"] = line_number
-        if xy is not None:
-            args["x"], args["y"] = xy
-        return await self.request("gcode", **args)
+        return await self.request("gcode", **gcode_args(line, line_number, xy, dialect))
 
 
-def _data(response: dict[str, Any]) -> dict[str, Any]:
+def gcode_args(
+    line: str, line_number: int | None, xy: tuple[float, float] | None, dialect: str | None
+) -> dict[str, Any]:
+    """A ``gcode`` request's arguments: the line, and what is known of it."""
+    args: dict[str, Any] = {"line": line}
+    if dialect is not None:
+        args["dialect"] = dialect
+    if line_number is not None:
+        args["line_number"] = line_number
+    if xy is not None:
+        args["x"], args["y"] = xy
+    return args
+
+
+def response_data(response: dict[str, Any]) -> dict[str, Any]:
     """A response's data; DaemonError with its error when it is not ok."""
     if response.get("status") != "ok":
         raise DaemonError(str(response.get("error") or "error"))

@@ -41,7 +41,7 @@ from dthc_bridge.program.plan import (
 )
 
 from .backend import BackendError, MotionBackend, Positioned
-from .daemon_client import DaemonClient, DaemonError
+from .daemon_client import DaemonError, DaemonSeam
 from .path import ProgramPath, build_path, starts_cut
 from .recovery import ResumeAt
 
@@ -131,7 +131,7 @@ class Progress:
 
 class Sender:
     def __init__(
-        self, daemon: DaemonClient, backend: MotionBackend, *, auto_cycle_start: bool = False
+        self, daemon: DaemonSeam, backend: MotionBackend, *, auto_cycle_start: bool = False
     ) -> None:
         self.daemon = daemon
         self.backend = backend
