@@ -246,6 +246,8 @@ class ProgramPlan:
         self._in_cut = False
         self._pierce_only_skip = False
         self._warned_filter = False
+        self._probed = False  # a probe ran (G38.x/G31)
+        self._touched_off = False  # ... and the program set its Z origin after it
 
     # --- program parameters ----------------------------------------------------------------
 
@@ -358,6 +360,16 @@ class ProgramPlan:
             return  # the M190 before it was answered once the material was applied
         probe = gs & _PROBE_G
         origin = (92.0 in gs or 10.0 in gs) and any(w.letter == "Z" for w in words)
+        if probe and not self.keep_z_motion:
+            # PlasmaC strips the Z moves that would lift the torch off the work again, and
+            # its M3 touches off by itself (and refuses to start on a closed switch).
+            raise CommandError(
+                f"G{min(probe):g}", "a PlasmaC program's Z moves are stripped, so the torch "
+                "would stay on the work after this probe and M3 would refuse to start: M3 "
+                "touches off by itself (remove the probe), or set #<keep-z-motion> = 1 to run "
+                "the program's own Z moves")  # fmt: skip
+        self._probed = self._probed or bool(probe)
+        self._touched_off = self._touched_off or (origin and self._probed)
         if probe or origin or 92.1 in gs:
             yield from self._board_z_line(number, here, words, bool(probe))
             return
@@ -501,6 +513,13 @@ class ProgramPlan:
 
     def _plasma(self, number: int, here: str, text: str, parsed: ParsedLine) -> Iterator[Step]:
         starts = any(isinstance(c, TorchStart) for c in parsed.commands)
+        if any(isinstance(c, TorchStart) and c.relay for c in parsed.commands) \
+                and not self._touched_off:  # fmt: skip
+            raise CommandError(
+                _torch_word(here), "in the relay dialect this only switches the torch on, "
+                "and the program has not touched off before it (a G38.2/G31 probe, then "
+                "G92 Z or G10 L20 Z): the torch would fire at an unknown height. Leave the "
+                "dialect to detection, or touch off in the program first")  # fmt: skip
         stops = any(isinstance(c, TorchStop) for c in parsed.commands)
         if stops and self._pierce_only_skip:
             self._pierce_only_skip = False
@@ -525,6 +544,15 @@ class ProgramPlan:
             return None
         modal.noted_feed_mm_min = feed_mm_min
         return f"G1 F{_fmt(feed_mm_min)}"
+
+
+def _torch_word(here: str) -> str:
+    """The torch start as the user wrote it (``M3``, or a shop's own code mapped to it)."""
+    try:
+        words = tokenize(here).words
+    except GcodeSyntaxError:
+        return "M3"
+    return next((f"{w.letter}{w.number}" for w in words if w.letter == "M"), "M3")
 
 
 def _is_g(word: Word, value: float) -> bool:

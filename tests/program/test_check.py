@@ -194,7 +194,9 @@ def test_a_shops_own_torch_codes_are_mapped_and_reported_as_written() -> None:
 
 
 def test_a_relay_cut_with_no_z_known_has_no_pierce_height() -> None:
-    report = check_program(["G21", "M3", "G1 X10 F2000", "M5"], dialect=Dialect.RELAY)
+    """Touched off (probe, G92 Z), then lit where the probe left the torch."""
+    program = ["G21", "G38.2 Z-40 F300", "G92 Z0", "M3", "G1 X10 F2000", "M5"]
+    report = check_program(program, dialect=Dialect.RELAY)
     assert only(report).pierce_height_mm is None
     json.dumps(report.as_dict(), allow_nan=False)  # valid JSON: no NaN
 

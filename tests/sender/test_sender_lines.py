@@ -187,21 +187,26 @@ async def test_pierce_only_pierces_and_skips_the_cut() -> None:
     assert backend.queued == ["G0 X5 Y5", "G0 X0"]
 
 
+TOUCH_OFF = ["G38.2 Z-40 F300", "G92 Z0"]  # a relay program touches off before its M3
+
+
 async def test_shop_codes_map_to_the_daemon_commands() -> None:
     """FireControl's H1/H0 in the relay dialect; a shop's own code from the table."""
-    daemon, _ = await _send(["M3", "H1", "H0", "M5", "M101"], Dialect.RELAY, M101="M666")
-    assert daemon.lines == ["M3", "M667", "M666", "M5", "M666"]
+    program = [*TOUCH_OFF, "M3", "H1", "H0", "M5", "M101"]
+    daemon, _ = await _send(program, Dialect.RELAY, M101="M666")
+    assert daemon.lines == [*TOUCH_OFF, "M3", "M667", "M666", "M5", "M666"]
 
 
 async def test_the_daemons_code_table_applies_and_the_senders_own_codes_win() -> None:
     started = {"codes": {"M10": "M3", "M11": "M5", "H7": "M667"}}
-    daemon, _ = await _send(["M10", "H7", "M11"], Dialect.RELAY, started, H7="M666")
-    assert daemon.lines == ["M3", "M666", "M5"]
+    daemon, _ = await _send([*TOUCH_OFF, "M10", "H7", "M11"], Dialect.RELAY, started, H7="M666")
+    assert daemon.lines == [*TOUCH_OFF, "M3", "M666", "M5"]
 
 
 async def test_a_program_with_nothing_dialect_specific_takes_the_daemons_dialect() -> None:
-    # A plain program: in the daemon's relay dialect its M3 is a torch relay.
-    program = ["G21 G90", "G0 Z3", "M3", "G1 X10 F2000", "M5"]
+    # A plain program (Z moves and motion, no touch-off: in the relay dialect its M3 is
+    # refused): its daemon lines go in the daemon's own dialect.
+    program = ["G21 G90", "G0 Z3", "G1 X10 F2000", "G0 Z10"]
     daemon, _ = await _send(program, None, {"dialect": "relay"})
     assert daemon.dialects == {"relay"}
     daemon, _ = await _send(program, None, {"dialect": "plasmac"})
