@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from .test_check_agrees import NGC_NAMES, agrees
+from ..program_shop import NGC_NAMES
+from .test_check_agrees import agrees
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
