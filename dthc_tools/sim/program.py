@@ -200,6 +200,7 @@ def run_program(
         report = loop.complete(send(), max_s)
         loop.run_until(lambda: False, 0.3)  # the last reports land, as the demo waits
         truth = loop.plant.truth
+        workdir.mkdir(parents=True, exist_ok=True)
         truth_path = workdir / "truth.jsonl"
         truth.write_jsonl(truth_path)
         mock_exit = {

@@ -8,6 +8,7 @@ the scenario's: a fixed voltage the sheet does not give makes the THC follow it.
 
 from __future__ import annotations
 
+import asyncio
 import json
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ import pytest
 
 from dthc_tools.demo import Stack, StackOptions
 from dthc_tools.demo.summary import summarize
+from dthc_tools.sim.program import run_program
 
 from ..program_shop import NC_NAMES, assert_agree, shop_run
 
@@ -83,6 +85,17 @@ async def agrees(name: str, tmp_path: Path) -> None:
                              "height_rms_mm": summary["height_rms_mm"],
                              "violations": summary["safety_violations"]}}))  # fmt: skip
     assert_agree(check, report, summary)
+    # The simulated-time run that holds every dialect to the check (tests/sim/
+    # test_every_dialect.py) is checked here against the processes: the same verdict,
+    # line and cuts, each burning as long within 5 % or 0.25 s (over the broker, each
+    # request the arc waits on, an S1 cut's two burns, takes its round trip).
+    simulated = await asyncio.to_thread(
+        run_program, run.lines, tmp_path / "sim", settings=run.settings(), codes=run.codes
+    )
+    assert (simulated.report.ok, simulated.report.error_line) == (report.ok, report.error_line)
+    burns = [cut["arc_on_s"] for cut in summary["cuts"]]
+    simulated_burns = [cut["arc_on_s"] for cut in summarize(simulated, 50.0)["cuts"]]
+    assert simulated_burns == pytest.approx(burns, rel=0.05, abs=0.25)
     if check.ok:
         assert summary["daemon_exit_code"] == 0
         if name in DETAILS:
