@@ -48,8 +48,8 @@ from ..controller.commands import (
 from ..controller.dialect import Dialect
 from ..controller.gcode import ParsedLine, parse_line
 from ..controller.words import GcodeSyntaxError, Word, tokenize
-from ..materials.library import MM_PER_INCH
 from ..materials.magic import TUBE_DEFAULTS
+from .modal import ModalState
 from .ngc import EvaluatedLine, NgcError, NgcProgram
 from .ngc import format_number as _fmt
 
@@ -86,17 +86,28 @@ _FILTER_PARAMS = ("holes", "h_diameter", "h_velocity", "oclength", "m_diameter")
 
 @dataclass(frozen=True, slots=True)
 class DaemonStep:
+    """A line for the daemon, and its commands as the plan parsed it: its readers (the
+    sender, the path) take them from here instead of parsing the line again (STYLE 24).
+    The daemon parses the text it is sent, in the same dialect."""
+
     line: str
     source_line: int
     text: str  # the program's line as written (evaluated)
+    parsed: ParsedLine
     feed_note: bool = False  # only the anti-dive reference: never waits for motion
 
 
 @dataclass(frozen=True, slots=True)
 class MotionStep:
+    """A line for the motion backend, and its words (read once, when it is made)."""
+
     line: str
     source_line: int
     text: str
+    words: tuple[Word, ...] = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "words", tokenize(self.line).words)
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,7 +167,7 @@ def unknown_m_codes(steps: Sequence[Step]) -> list[Refused]:
     first: dict[float, MotionStep] = {}
     for step in steps:
         if isinstance(step, MotionStep):
-            for word in tokenize(step.line).words:
+            for word in step.words:
                 if word.letter == "M" and word.value not in MOTION_M_CODES:
                     first.setdefault(word.value, step)
     names = [f"M{code:g}" for code in first]
@@ -217,16 +228,6 @@ def _strip_hash_comment(line: str) -> str:
 
 
 @dataclass
-class _Modal:
-    units: float = 1.0  # mm per program unit
-    absolute: bool = True
-    motion: int = 0  # 0/1/2/3
-    feed: float | None = None  # program units/min
-    z: float | None = None  # work Z in mm, as last commanded; None: unknown
-    noted_feed_mm_min: float | None = None
-
-
-@dataclass
 class ProgramPlan:
     """The steps of one program. ``pins_mm`` holds what ``#<_hal[...]>`` reads (in mm, the
     program reads them in its units; READABLE_PINS): the caller sets them from the daemon's
@@ -241,7 +242,9 @@ class ProgramPlan:
 
     def __post_init__(self) -> None:
         self._codes = {**DEFAULT_CODES.get(self.dialect, {}), **self.codes}
-        self._modal = _Modal()
+        self._modal = ModalState()
+        self._z_mm: float | None = None  # work Z as last commanded; None: unknown
+        self._noted_feed_mm_min: float | None = None  # the cutting feed the daemon was told
         self._ngc: NgcProgram | None = None
         self._in_cut = False
         self._pierce_only_skip = False
@@ -292,7 +295,7 @@ class ProgramPlan:
         value = self.pins_mm.get(pin)
         if value is None:  # the daemon did not say (it always does)
             raise ValueError(f"HAL pin {pin!r}: the daemon gave no value")
-        return value / self._modal.units
+        return value / self._modal.mm_per_unit
 
     # --- steps -----------------------------------------------------------------------------
 
@@ -383,6 +386,12 @@ class ProgramPlan:
         parsed = parse_line(text, line_number=number, dialect=self.dialect)
         yield from self._split(number, here, text.strip(), parsed, (z_step, going_down))
 
+    def _daemon(self, line: str, number: int, here: str, *, feed_note: bool = False) -> DaemonStep:
+        """A line the plan writes for the daemon (Z in mm, a feed note), parsed as the
+        daemon will parse it."""
+        parsed = parse_line(line, line_number=number, dialect=self.dialect)
+        return DaemonStep(line, number, here, parsed, feed_note=feed_note)
+
     def _mapped(self, text: str) -> str:
         if not self._codes:
             return text
@@ -396,21 +405,7 @@ class ProgramPlan:
         return "".join(out) + text[kept:]
 
     def _track_modal(self, words: Sequence[Word]) -> None:
-        modal = self._modal
-        for w in words:
-            if w.letter == "G":
-                if w.value == 20.0:
-                    modal.units = MM_PER_INCH
-                elif w.value == 21.0:
-                    modal.units = 1.0
-                elif w.value == 90.0:
-                    modal.absolute = True
-                elif w.value == 91.0:
-                    modal.absolute = False
-                elif w.value in (0.0, 1.0, 2.0, 3.0):
-                    modal.motion = int(w.value)
-            elif w.letter == "F" and w.value > 0:
-                modal.feed = w.value
+        self._modal.apply((w.letter, w.value) for w in words)
 
     def _dwell(self, number: int, here: str, words: Sequence[Word]) -> Iterator[Step]:
         p = next((w for w in words if w.letter == "P"), None)
@@ -431,7 +426,7 @@ class ProgramPlan:
     ) -> Iterator[Step]:
         """G38.2/G31 probes and G92/G10 L20 Z origins: to the daemon, in mm. The line's
         other words (``G20 G90 G92.1`` in a preamble) still reach the motion backend."""
-        units = self._modal.units
+        units = self._modal.mm_per_unit
         parts: list[str] = []
         xy = [w for w in words if w.letter in "XYABC"]
         board = [
@@ -448,8 +443,8 @@ class ProgramPlan:
         modal = [w for w in words if w not in board and w not in xy and w.letter != "N"]
         if modal:
             yield MotionStep(" ".join(f"{w.letter}{w.number}" for w in modal), number, here)
-        self._modal.z = None  # where a probe stops, or what an origin makes Z read
-        yield DaemonStep(" ".join(parts), number, here)
+        self._z_mm = None  # where a probe stops, or what an origin makes Z read
+        yield self._daemon(" ".join(parts), number, here)
         if any(_is_g(w, 92.1) for w in words):
             yield MotionStep("G92.1", number, here)  # the XY offsets go too
         if xy and not probe:
@@ -466,24 +461,24 @@ class ProgramPlan:
         machine = any(_is_g(w, 53.0) for w in words)
         if modal.motion in (2, 3):
             raise CommandError(f"Z{z.number}", "Z belongs to the board: no helical arcs")
-        value = z.value * modal.units
+        value = modal.to_mm(z.value)
         if not modal.absolute and not machine:
-            if modal.z is None:
+            if self._z_mm is None:
                 raise CommandError(f"Z{z.number}", "incremental Z (G91) from an unknown height")
-            value += modal.z
+            value += self._z_mm
         if not self.keep_z_motion:
             self.z_stripped += 1
             return None, False
-        previous = modal.z
-        modal.z = None if machine else value
-        going_down = previous is not None and modal.z is not None and modal.z < previous
+        previous = self._z_mm
+        self._z_mm = None if machine else value
+        going_down = previous is not None and self._z_mm is not None and self._z_mm < previous
         if modal.motion == 1:
-            if modal.feed is None:
+            if modal.feed_mm_min is None:
                 raise CommandError("G1 Z", "no feed programmed (F)")
-            line = f"G1 Z{_fmt(value)} F{_fmt(modal.feed * modal.units)}"
+            line = f"G1 Z{_fmt(value)} F{_fmt(modal.feed_mm_min)}"
         else:
             line = f"{'G53 ' if machine else ''}G0 Z{_fmt(value)}"
-        return DaemonStep(line, number, here), going_down
+        return self._daemon(line, number, here), going_down
 
     def _split(
         self,
@@ -507,7 +502,7 @@ class ProgramPlan:
             yield MotionStep(motion, number, here)
             note = self._feed_note(motion)
             if note is not None:
-                yield DaemonStep(note, number, here, feed_note=True)
+                yield self._daemon(note, number, here, feed_note=True)
         if z_step is not None and going_down:
             yield z_step
 
@@ -524,25 +519,25 @@ class ProgramPlan:
         if stops and self._pierce_only_skip:
             self._pierce_only_skip = False
             return  # its M5 was sent right after the pierce
-        yield DaemonStep(text, number, here)
+        yield DaemonStep(text, number, here, parsed)
         if starts or stops:
-            self._modal.z = None  # the daemon moves Z in its sequence
+            self._z_mm = None  # the daemon moves Z in its sequence
         if starts and self.pierce_only and self.dialect is Dialect.PLASMAC:
-            yield DaemonStep("M5 $0", number, "(pierce only) M5 $0")
+            yield self._daemon("M5 $0", number, "(pierce only) M5 $0")
             self._pierce_only_skip = True
 
     def _feed_note(self, motion: str) -> str | None:
         """``G1 F<mm/min>`` for the daemon when the programmed cutting feed changes."""
         modal = self._modal
         words = tokenize(motion).words
-        if modal.motion not in (1, 2, 3) or modal.feed is None:
+        feed_mm_min = modal.feed_mm_min
+        if modal.motion not in (1, 2, 3) or feed_mm_min is None:
             return None
         if not any(w.letter in "XYIJ" for w in words):
             return None  # a Z-only feed (G1 Z1.5 F600) is not the cutting feed
-        feed_mm_min = modal.feed * modal.units
-        if feed_mm_min == modal.noted_feed_mm_min:
+        if feed_mm_min == self._noted_feed_mm_min:
             return None
-        modal.noted_feed_mm_min = feed_mm_min
+        self._noted_feed_mm_min = feed_mm_min
         return f"G1 F{_fmt(feed_mm_min)}"
 
 

@@ -19,9 +19,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ..controller.commands import Command, CommandError, ProbeAndStart, TorchStart, TorchStop
-from ..controller.gcode import parse_line
-from ..controller.words import tokenize
+from ..controller.commands import Command, ProbeAndStart, TorchStart, TorchStop
+from .modal import ModalState
 from .plan import DaemonStep, MotionStep, ProgramPlan, Step
 
 __all__ = ["KIND_NAMES", "PathTracer", "Segment", "path_entries", "radius_centre", "starts_cut"]
@@ -150,19 +149,15 @@ class PathTracer:
     def __init__(self, plan: ProgramPlan) -> None:
         self.plan = plan
         self.segments: list[Segment] = []
-        self.scale = 1.0  # mm per program unit
-        self.absolute = True
-        self.arc_abs = False
+        self.modal = ModalState()
         self.arc_absolute = False  # G90.1 somewhere in the program
-        self.motion = 0
-        self.feed: float | None = None
         self.x = self.y = 0.0
         self.cut: int | None = None
         self.cut_steps: list[int] = []  # the plan step that starts each cut (its M3)
 
     @property
     def inch(self) -> bool:
-        return self.scale != 1.0
+        return self.modal.inches
 
     def step(self, index: int, step: Step) -> None:
         if isinstance(step, DaemonStep) and not step.feed_note:
@@ -171,11 +166,7 @@ class PathTracer:
             self._motion(index, step)
 
     def _daemon(self, index: int, step: DaemonStep) -> None:
-        try:
-            parsed = parse_line(step.line, line_number=step.source_line, dialect=self.plan.dialect)
-        except CommandError:
-            return
-        for command in parsed.commands:
+        for command in step.parsed.commands:
             if starts_cut(command):
                 self.cut = len(self.cut_steps)
                 self.cut_steps.append(index)
@@ -183,41 +174,24 @@ class PathTracer:
                 self.cut = None
 
     def _motion(self, index: int, step: MotionStep) -> None:
-        coords: dict[str, float] = {}
-        codes: set[float] = set()
-        for word in tokenize(step.line).words:
-            if word.letter == "G":
-                codes.add(word.value)
-            elif word.letter in "XYIJRP":
-                coords[word.letter] = word.value
-            elif word.letter == "F":
-                self.feed = word.value
-        for code in codes:
-            if code in (20.0, 21.0):
-                self.scale = 25.4 if code == 20.0 else 1.0
-            elif code in (90.0, 91.0):
-                self.absolute = code == 90.0
-            elif code in (90.1, 91.1):
-                self.arc_abs = code == 90.1
-                self.arc_absolute |= self.arc_abs
-            elif code in (0.0, 1.0, 2.0, 3.0):
-                self.motion = int(code)
+        modal = self.modal
+        modal.apply((w.letter, w.value) for w in step.words)
+        self.arc_absolute |= modal.arc_absolute
+        codes = {w.value for w in step.words if w.letter == "G"}
+        coords = {w.letter: w.value for w in step.words if w.letter in "XYIJRP"}
         if codes & _NOT_TARGETS or not ("X" in coords or "Y" in coords):
             return
-        k = self.scale
         x0, y0 = self.x, self.y
-        x1 = (coords["X"] * k if self.absolute else x0 + coords["X"] * k) if "X" in coords else x0
-        y1 = (coords["Y"] * k if self.absolute else y0 + coords["Y"] * k) if "Y" in coords else y0
+        x1, y1 = modal.xy_target(x0, y0, coords)
         self.x, self.y = x1, y1
         cx = cy = sweep = 0.0
-        if self.motion in (2, 3):
-            clockwise = self.motion == 2
+        if modal.motion in (2, 3):
+            clockwise = modal.motion == 2
             if "R" in coords:
-                cx, cy = radius_centre(x0, y0, x1, y1, coords["R"] * k, clockwise=clockwise)
-            elif self.arc_abs:
-                cx, cy = coords.get("I", x0 / k) * k, coords.get("J", y0 / k) * k
+                radius = modal.to_mm(coords["R"])
+                cx, cy = radius_centre(x0, y0, x1, y1, radius, clockwise=clockwise)
             else:
-                cx, cy = x0 + coords.get("I", 0.0) * k, y0 + coords.get("J", 0.0) * k
+                cx, cy = modal.arc_centre(x0, y0, coords)
             sweep = math.atan2(y1 - cy, x1 - cx) - math.atan2(y0 - cy, x0 - cx)
             if clockwise and sweep >= -1e-12:
                 sweep -= TAU
@@ -227,8 +201,8 @@ class PathTracer:
             sweep += (-TAU if clockwise else TAU) * extra_turns
         self.segments.append(
             Segment(
-                index=len(self.segments), kind=self.motion, x0=x0, y0=y0, x1=x1, y1=y1,
-                feed=self.feed, source_line=step.source_line, step_index=index, cut=self.cut,
-                cx=cx, cy=cy, sweep=sweep,
+                index=len(self.segments), kind=modal.motion, x0=x0, y0=y0, x1=x1, y1=y1,
+                feed=modal.feed_in_units, source_line=step.source_line, step_index=index,
+                cut=self.cut, cx=cx, cy=cy, sweep=sweep,
             )
         )  # fmt: skip

@@ -27,8 +27,8 @@ from dthc_bridge.controller.commands import (
     VelocityReduction,
 )
 from dthc_bridge.controller.dialect import Dialect
-from dthc_bridge.controller.gcode import parse_line
-from dthc_bridge.controller.words import Word, tokenize
+from dthc_bridge.controller.words import Word
+from dthc_bridge.program.modal import ModalState
 from dthc_bridge.program.plan import (
     DaemonStep,
     DwellStep,
@@ -376,7 +376,7 @@ class Sender:
         # ahead.
         ahead = ProgramPlan(lines, dialect, table)
         listed = list(ahead.steps())
-        self.progress.total_cuts = sum(_cuts_in(step, ahead) for step in listed)
+        self.progress.total_cuts = sum(_cuts_in(step) for step in listed)
         self.path = build_path(ahead, listed)
         unknown = unknown_m_codes(listed) if not self.progress.total_cuts else []
         if unknown:  # as check-program: codes nobody knows and no cut is not a program run
@@ -397,11 +397,11 @@ class Sender:
             if resumed is not None and index < resumed.step_index:
                 restart.skip(step)
                 if not resumed.replays(index, step):
-                    self.progress.cut += _cuts_in(step, plan)
+                    self.progress.cut += _cuts_in(step)
                 continue
             if resumed is None and number < start_line:
                 restart.skip(step)
-                self.progress.cut += _cuts_in(step, plan)
+                self.progress.cut += _cuts_in(step)
                 continue
             self.last_step = index
             report.lines_run.add(number)
@@ -521,9 +521,8 @@ class Sender:
             raise CommandError("", step.error)
         number = step.source_line
         if isinstance(step, MotionStep):
-            words = tokenize(step.line).words  # the plan has checked every number
             await self._unless_paused(
-                self.backend.queue(self._reduced(step.line, words), source_line=number)
+                self.backend.queue(self._reduced(step.line, step.words), source_line=number)
             )
             report.lines_sent += 1
             return
@@ -539,7 +538,7 @@ class Sender:
         await self._daemon_line(step, plan, report)
 
     async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
-        parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
+        parsed = step.parsed
         xy = await self._wait_motion()
         await self._unless_paused(self._go.wait())  # an operator pause: not during it
         if self._pause.is_set():
@@ -617,11 +616,8 @@ class RestartPosition:
     _NOT_TARGETS = frozenset({10.0, 28.0, 28.1, 30.0, 30.1, 53.0, 92.0, 92.1})
 
     def __init__(self) -> None:
-        self.units = 21.0  # G21 mm / G20 inch
-        self.absolute = True
-        self.motion: float | None = None  # G0-G3
+        self.modal = ModalState()
         self.offset: float | None = None  # G54-G59
-        self.feed: float | None = None  # in the units in force when it was set
         self.x_mm: float | None = None
         self.y_mm: float | None = None
         self.unknown = ""  # why the position is unknown, if it is
@@ -631,29 +627,18 @@ class RestartPosition:
         if not isinstance(step, MotionStep):
             return
         self.pending = True
-        words = tokenize(step.line).words
-        codes = {w.value for w in words if w.letter == "G"}
-        for code in codes:
-            if code in (20.0, 21.0):
-                self.units = code
-            elif code in (90.0, 91.0):
-                self.absolute = code == 90.0
-            elif code in (0.0, 1.0, 2.0, 3.0):
-                self.motion = code
-            elif 54.0 <= code <= 59.0:
-                self.offset = code
-        scale = 25.4 if self.units == 20.0 else 1.0
-        for word in words:
-            if word.letter == "F":
-                self.feed = word.value
+        modal = self.modal
+        modal.apply((w.letter, w.value) for w in step.words)
+        codes = {w.value for w in step.words if w.letter == "G"}
+        self.offset = next((code for code in codes if 54.0 <= code <= 59.0), self.offset)
         if codes & self._NOT_TARGETS:
             return
-        for word in words:
+        for word in step.words:
             if word.letter not in "XY":
                 continue
-            value = word.value * scale
+            value = modal.to_mm(word.value)
             now = self.x_mm if word.letter == "X" else self.y_mm
-            if not self.absolute:
+            if not modal.absolute:
                 if now is None:
                     self.unknown = (
                         f"line {step.source_line} moves incrementally from an unknown start"
@@ -673,30 +658,27 @@ class RestartPosition:
         self.pending = False
         if self.unknown:
             raise BackendError(f"cannot restart here: {self.unknown}")
-        scale = 25.4 if self.units == 20.0 else 1.0
+        modal = self.modal
         offset = f" G{self.offset:g}" if self.offset is not None else ""
-        out = [f"G{self.units:g} G90{offset}"]
-        target = "".join(f" {axis}{v / scale:.4f}" for axis, v in (("X", self.x_mm),
+        out = [f"G{20 if modal.inches else 21} G90{offset}"]
+        target = "".join(f" {axis}{v / modal.mm_per_unit:.4f}" for axis, v in (("X", self.x_mm),
                          ("Y", self.y_mm)) if v is not None)  # fmt: skip
         if target:
             out.append(f"G0{target}")
-        modal = [f"G{self.motion:g}" if self.motion not in (None, 0.0) else "",
-                 f"F{self.feed:g}" if self.feed is not None else ""]  # fmt: skip
-        if any(modal):
-            out.append("".join(modal))
-        if not self.absolute:
+        feed = modal.feed_in_units
+        words = [f"G{modal.motion:g}" if modal.motion != 0 else "",
+                 f"F{feed:g}" if feed is not None else ""]  # fmt: skip
+        if any(words):
+            out.append("".join(words))
+        if not modal.absolute:
             out.append("G91")
         return out
 
 
-def _cuts_in(step: Step, plan: ProgramPlan) -> int:
+def _cuts_in(step: Step) -> int:
     if not isinstance(step, DaemonStep) or step.feed_note:
         return 0
-    try:
-        parsed = parse_line(step.line, line_number=step.source_line, dialect=plan.dialect)
-    except CommandError:
-        return 0
-    return sum(1 for command in parsed.commands if starts_cut(command))
+    return sum(1 for command in step.parsed.commands if starts_cut(command))
 
 
 def _daemon_dialect(started: Mapping[str, Any]) -> tuple[Dialect, str] | None:
