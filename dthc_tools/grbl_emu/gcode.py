@@ -21,12 +21,13 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from dthc_bridge.program.modal import MM_PER_INCH, ModalState
+
 from .blocks import Action, Dwell, Move, MoveKind, ProgramStop, Vec3, Word
 from .codes import GcodeRefused, Status
 
 __all__ = ["GcodeInterpreter", "Modal"]
 
-MM_PER_INCH = 25.4
 MAX_LINE_NUMBER = 9_999_999
 MAX_TOOL_NUMBER = 255
 N_COORD_SYSTEMS = 6
@@ -36,13 +37,12 @@ ARC_RADIUS_TOLERANCE_REL = 0.001
 
 
 @dataclass(slots=True)
-class Modal:
-    """The parser's modal state (what ``$G`` shows)."""
+class Modal(ModalState):
+    """The parser's modal state (what ``$G`` shows): the program's units, distance mode,
+    plane and motion (80 after G80) as every reader keeps them (ModalState; grbl sets
+    them itself, after its modal-group checks), and grbl's other groups. grbl keeps the
+    feed itself (``feed_value``: in G93 it is not a speed)."""
 
-    motion: int = 0  # 0, 1, 2, 3 or 80
-    plane: int = 17
-    inches: bool = False
-    incremental: bool = False
     inverse_time: bool = False
     wcs: int = 0  # 0..5: G54..G59
     tlo_dynamic: bool = False  # G43.1 (else G49)
@@ -191,7 +191,7 @@ class GcodeInterpreter:
         elif code in (90, 91):
             if mantissa == 0:
                 group = "distance"
-                block.modal.incremental = code == 91
+                block.modal.absolute = code == 90
             else:
                 # Only G91.1 exists (incremental IJK, grbl's only arc mode); G90.1 is refused.
                 if mantissa != 10 or code == 90:
@@ -272,7 +272,7 @@ class GcodeInterpreter:
 
     def _check_and_commit(self, block: _Block, jog: bool) -> tuple[Action, ...]:
         modal, values = block.modal, block.values
-        unit = MM_PER_INCH if modal.inches else 1.0
+        unit = modal.mm_per_unit
         axis_words = {a for a in _AXES if a in values}
         if axis_words and not block.axis_command:
             block.axis_command = "motion"
@@ -327,7 +327,7 @@ class GcodeInterpreter:
                         continue
                     if block.non_modal == "G53":
                         target[i] = xyz_mm[i]
-                    elif modal.incremental:
+                    elif not modal.absolute:
                         target[i] = self.position[i] + xyz_mm[i]
                     else:
                         target[i] = xyz_mm[i] + block_wcs[i] + self.g92[i]
@@ -514,7 +514,7 @@ class GcodeInterpreter:
         """M2/M30: the modes grbl restores at program end (units and G92 stay)."""
         self.modal.motion = 1
         self.modal.plane = 17
-        self.modal.incremental = False
+        self.modal.absolute = True
         self.modal.inverse_time = False
         self.modal.wcs = 0
         self.modal.spindle = 5
@@ -532,7 +532,7 @@ class GcodeInterpreter:
             feed_text = f"{feed:.0f}"
         return (
             f"[GC:G{m.motion} G{54 + m.wcs} G{m.plane} G{20 if m.inches else 21} "
-            f"G{91 if m.incremental else 90} G{93 if m.inverse_time else 94} M{m.spindle} "
+            f"G{90 if m.absolute else 91} G{93 if m.inverse_time else 94} M{m.spindle} "
             f"{coolant} T{self.tool} F{feed_text} S{self.spindle_rpm:.0f}]"
         )
 

@@ -10,11 +10,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from dthc_bridge.program.modal import MM_PER_INCH
+
 from .config import EmulatorConfig, Flavor
 
 __all__ = ["HELP", "UNLOCK_HINT", "StatusFields", "banner", "build_info", "status_report"]
 
-MM_PER_INCH = 25.4
 HELP = "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"
 UNLOCK_HINT = "[MSG:'$H'|'$X' to unlock]"
 

@@ -13,11 +13,13 @@ the segment's feed and follows a discrete-time braking curve towards the next se
 entry speed, so the tangential acceleration never exceeds the limit.
 """
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Iterable
 
 from dthc_bridge.controller.words import GcodeSyntaxError, words
+from dthc_bridge.program.modal import ModalState
 
 from .scenario import GantrySpec
 
@@ -68,15 +70,12 @@ class Gantry:
     """XY motion of the table, fed with G-code motion lines, advanced by ``step``."""
 
     __slots__ = (
-        "_absolute",
         "_accel",
-        "_arc_abs",
         "_chord_mm",
         "_cur",
         "_delta",
-        "_feed_mm_min",
         "_held",
-        "_motion",
+        "_modal",
         "_plan_dt_s",
         "_px",
         "_py",
@@ -84,7 +83,6 @@ class Gantry:
         "_rapid_mm_s",
         "_s_rem",
         "_tail",
-        "_units",
         "requested_feed_mm_s",
         "speed_mm_s",
         "x_mm",
@@ -116,12 +114,9 @@ class Gantry:
         self._tail: Segment | None = None
         self._s_rem = 0.0
         self._held = False
-        # Parser modal state and the planned end point.
-        self._absolute = True
-        self._arc_abs = False
-        self._units = 1.0
-        self._motion = 0
-        self._feed_mm_min: float | None = None
+        # The program's modal state (as every reader of a program keeps it) and the
+        # planned end point.
+        self._modal = ModalState()
         self._px = x_mm
         self._py = y_mm
 
@@ -210,66 +205,38 @@ class Gantry:
             pairs = words(line)
         except GcodeSyntaxError as exc:
             raise GcodeError(line, f"unparseable text ({exc})") from None
-        absolute, arc_abs, units, motion = self._absolute, self._arc_abs, self._units, self._motion
-        feed = self._feed_mm_min
         coords: dict[str, float] = {}
         for letter, value in pairs:
-            if letter == "G":
-                if value in (0.0, 1.0, 2.0, 3.0):
-                    motion = int(value)
-                elif value == 90.0:
-                    absolute = True
-                elif value == 91.0:
-                    absolute = False
-                elif value == 90.1:
-                    arc_abs = True
-                elif value == 91.1:
-                    arc_abs = False
-                elif value == 20.0:
-                    units = 25.4
-                elif value == 21.0:
-                    units = 1.0
-                elif value in (18.0, 19.0):
-                    raise GcodeError(line, "only the XY plane (G17) is supported")
-            elif letter in "XYIJ":
+            if letter == "G" and value in (18.0, 19.0):
+                raise GcodeError(line, "only the XY plane (G17) is supported")
+            if letter in "XYIJ":
                 if letter in coords:
                     raise GcodeError(line, f"{letter} given twice")
                 coords[letter] = value
-            elif letter == "F":
-                if value <= 0.0:
-                    raise GcodeError(line, "feed rate must be positive")
-                feed = value * units
+            elif letter == "F" and value <= 0.0:
+                raise GcodeError(line, "feed rate must be positive")
             elif letter == "R":
                 raise GcodeError(line, "R-form arcs are not supported, use I J")
+        modal = dataclasses.replace(self._modal)
+        modal.apply(pairs)
+        motion, feed = modal.motion, modal.feed_mm_min
         has_xy = "X" in coords or "Y" in coords
         if motion in (1, 2, 3) and has_xy and feed is None:
             raise GcodeError(line, "no feed rate (F) programmed")
         if motion in (2, 3) and has_xy and "I" not in coords and "J" not in coords:
             raise GcodeError(line, "arc without I or J")
-        # The line is valid: commit the modal state, then queue its motion.
-        self._absolute, self._arc_abs, self._units, self._motion = absolute, arc_abs, units, motion
-        self._feed_mm_min = feed
+        self._modal = modal  # the line is valid: its modal state holds, then its motion queues
         if not has_xy:
             return 0
         x0, y0 = self._px, self._py
-        if absolute:
-            x1 = coords["X"] * units if "X" in coords else x0
-            y1 = coords["Y"] * units if "Y" in coords else y0
-        else:
-            x1 = x0 + coords.get("X", 0.0) * units
-            y1 = y0 + coords.get("Y", 0.0) * units
+        x1, y1 = modal.xy_target(x0, y0, coords)
         if motion == 0:
             return self._queue_points([(x1, y1)], self._rapid_mm_s)
         assert feed is not None
         feed_mm_s = feed / 60.0
         if motion == 1:
             return self._queue_points([(x1, y1)], feed_mm_s)
-        if arc_abs:
-            cx = coords.get("I", x0 / units) * units
-            cy = coords.get("J", y0 / units) * units
-        else:
-            cx = x0 + coords.get("I", 0.0) * units
-            cy = y0 + coords.get("J", 0.0) * units
+        cx, cy = modal.arc_centre(x0, y0, coords)
         points, radius = self._arc_points(x0, y0, x1, y1, cx=cx, cy=cy, clockwise=motion == 2)
         return self._queue_points(points, min(feed_mm_s, math.sqrt(self._accel * radius)))
 

@@ -103,7 +103,7 @@ def test_dwell_motion_and_program_end_come_in_grbls_order() -> None:
     run(parser, "G91G1F100")
     actions = run(parser, "G4P0.5X1M2")
     assert [type(a) for a in actions] == [Dwell, Move, ProgramStop]
-    assert parser.modal.incremental is False
+    assert parser.modal.absolute is True
     assert parser.modal.motion == 1
 
 
