@@ -373,8 +373,10 @@ class Sender:
         table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
         # Counted, and the path drawn, on a plan of its own: the running plan's NGC reads
         # the daemon's answers (cut-feed-rate after an M190), so its steps cannot be listed
-        # ahead.
+        # ahead. This one reads the pins of the material in force at the start: a later
+        # M190 changes a feed or a Z origin, not where the cuts are.
         ahead = ProgramPlan(lines, dialect, table)
+        ahead.note_pins(started)
         listed = list(ahead.steps())
         self.progress.total_cuts = sum(_cuts_in(step) for step in listed)
         self.path = build_path(ahead, listed)

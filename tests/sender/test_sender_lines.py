@@ -37,7 +37,7 @@ class FakeDaemon:
     def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None:
         pass
 
-    async def notify(self, name: str, **args: Any) -> None:
+    async def notify(self, name: str, /, **args: Any) -> None:
         pass
 
     async def gcode(
@@ -222,3 +222,19 @@ async def test_a_velocity_reduction_scales_the_feed_the_machine_runs() -> None:
         "G1 X10 F750.0", "G1X20F1500.0Y5", "G1 X30", "G1 X40 F1500",
     ]  # fmt: skip
     assert daemon.lines == ["M67 E3 Q50", "G1 F1500", "G1 F3000", "M67 E3 Q0", "G1 F1500"]
+
+
+async def test_a_program_reading_hal_pins_is_counted_and_drawn_to_its_end() -> None:
+    """The cuts and the path are listed ahead of the run; a program that reads the cut
+    feed from a HAL pin (a SheetCam PlasmaC post) is listed past that line, as it runs."""
+    program = ["G21 G90", "M190 P1", "M66 P3 L3 Q1", "F#<_hal[plasmac.cut-feed-rate]>",
+               "G0 X10 Y10", "M3 $0 S1", "G1 X20", "M5 $0",
+               "G0 X30", "M3 $0 S1", "G1 X40", "M5 $0", "M2"]  # fmt: skip
+    daemon, backend = FakeDaemon(), FakeBackend()
+    sender = Sender(daemon, backend)
+    report = await sender.run(program, dialect=Dialect.PLASMAC)
+    assert report.ok, report.error
+    assert sender.progress.total_cuts == 2
+    assert sender.path is not None
+    last = sender.path.document("pins.ngc")["moves"][-1]
+    assert (last["cut"], last["points"][-1]) == (1, [40.0, 10.0])
