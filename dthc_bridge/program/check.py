@@ -31,7 +31,6 @@ from ..controller.commands import (
     TorchStop,
 )
 from ..controller.dialect import Dialect
-from ..controller.gcode import parse_line
 from ..controller.plasma import PlasmaController, default_material
 from ..controller.words import cutting_feed_mm_min
 from ..materials import Material, MaterialError, MaterialStore
@@ -122,7 +121,7 @@ class _Model:
             self._relay_dwell_due = False
 
     def apply(self, step: DaemonStep, report: CheckReport) -> None:
-        parsed = parse_line(step.line, line_number=step.source_line, dialect=self.plan.dialect)
+        parsed = step.parsed
         if step.feed_note:
             feed = cutting_feed_mm_min(step.line)
             self.feed_mm_min = feed
