@@ -75,6 +75,13 @@ __all__ = ["EvaluatedLine", "HalReader", "NgcError", "NgcProgram", "format_numbe
 HalReader = Callable[[str], float]
 
 
+STREAMED_OWORD = (
+    "o-word flow (sub, call, if, while, repeat) needs the whole program, and a program "
+    "streamed line by line (a grbl sender) arrives one line at a time: run it with "
+    "dthc-bridge send, or from a post without o-words"
+)
+
+
 class NgcError(ValueError):
     """A program refused: the source line, the construct as the user wrote it, and why."""
 
@@ -731,6 +738,20 @@ class NgcProgram:
         except _Flow as flow:
             if flow.kind != "stop":  # break/continue/return were matched up when built
                 raise AssertionError(f"unmatched {flow.kind}") from flow
+
+    def evaluate_streamed(self, number: int, text: str) -> EvaluatedLine | None:
+        """One more line of a program that arrives line by line (a grbl sender streams it:
+        nothing after it is known yet), evaluated with the parameters the lines before it
+        set. O-word flow needs the lines after it, so it is refused; None for a line with
+        nothing left to run (a comment, an assignment)."""
+        line = _Parser(text, number).read()
+        if line is None:
+            return None
+        if isinstance(line, _OLine):
+            raise NgcError(number, line.head, STREAMED_OWORD)
+        self._tick(line)
+        output, _ = self._gline(line)
+        return EvaluatedLine(number, output) if output else None
 
     def get(self, name: str, *, top_level: bool = False) -> float | None:
         """Current value of a parameter: ``get("keep-z-motion")``, ``get("_x_offset")``,

@@ -328,6 +328,32 @@ class ProgramPlan:
                 yield Refused(line.source_line, self._written(line.source_line), str(exc))
             self._check_filter_params()
 
+    def stream(self, text: str) -> list[Step]:
+        """The steps of one more line of a program that arrives line by line, as a grbl
+        sender streams it: the same rules as :meth:`steps`, with what the lines before it
+        set (modal state, parameters, the touch-off). ``lines`` grows with each one; a
+        refused line is a :class:`Refused` and changes nothing after it."""
+        if not isinstance(self.lines, list):
+            raise TypeError("a streamed plan starts from a list of lines (the ones so far)")
+        self.lines.append(text)
+        number = len(self.lines)
+        try:
+            if self.dialect is Dialect.MASSO:
+                evaluated: EvaluatedLine | None = EvaluatedLine(number, _strip_hash_comment(text))
+            else:
+                if self._ngc is None:
+                    self._ngc = NgcProgram([], hal=self._hal)
+                evaluated = self._ngc.evaluate_streamed(number, text)
+            if evaluated is None or not evaluated.text.strip():
+                return []
+            steps = list(self._line(number, evaluated.text))
+        except NgcError as exc:
+            return [Refused(number, text.strip(), f"{exc.text}: {exc.reason}")]
+        except (CommandError, GcodeSyntaxError, ValueError) as exc:
+            return [Refused(number, text.strip(), str(exc))]
+        self._check_filter_params()
+        return steps
+
     def _written(self, number: int) -> str:
         """Line ``number`` (1-based) of the program as the user wrote it."""
         return self.lines[number - 1].strip() if 0 < number <= len(self.lines) else ""
