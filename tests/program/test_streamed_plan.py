@@ -9,7 +9,15 @@ import pytest
 
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.program.ngc import STREAMED_OWORD
-from dthc_bridge.program.plan import READABLE_PINS, ProgramPlan, Refused, Step, detect_dialect
+from dthc_bridge.program.plan import (
+    READABLE_PINS,
+    DaemonStep,
+    MotionStep,
+    ProgramPlan,
+    Refused,
+    Step,
+    detect_dialect,
+)
 
 PROGRAMS = Path(__file__).parents[1] / "programs"
 NAMES = sorted(p.name for p in PROGRAMS.iterdir() if p.suffix in (".nc", ".ngc"))
@@ -45,8 +53,13 @@ def test_a_streamed_line_reads_what_the_lines_before_it_set() -> None:
     assert plan.stream("#<depth> = 3.8") == []
     assert plan.stream("#<keep-z-motion> = 1") == []
     steps = plan.stream("G0 Z[#<depth> + 1]")
-    assert [step.line for step in steps] == ["G0 Z4.8", "G0"]  # Z to the board, G0 modal
+    assert [_line(step) for step in steps] == ["G0 Z4.8", "G0"]  # Z to the board, G0 modal
     refused = plan.stream("G1 X[#<nothing> + ]")
     assert isinstance(refused[0], Refused)
     assert refused[0].text == "G1 X[#<nothing> + ]"
-    assert [step.line for step in plan.stream("G20 G0 Z1")] == ["G0 Z25.4", "G20 G0"]
+    assert [_line(step) for step in plan.stream("G20 G0 Z1")] == ["G0 Z25.4", "G20 G0"]
+
+
+def _line(step: Step) -> str:
+    assert isinstance(step, DaemonStep | MotionStep), step
+    return step.line
