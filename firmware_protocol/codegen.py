@@ -255,7 +255,7 @@ def _c_struct(msg: MessageDecl) -> list[str]:
     if not msg.fields:
         lines.append("    uint8_t unused_; /* ISO C has no empty struct: neither sent nor read */")
     for f in msg.fields:
-        unit = f" [{f.unit}]" if f.unit else ""
+        unit = f" [{f.unit.replace('µ', 'u')}]" if f.unit else ""
         doc = f.doc if f.unit in f.doc else (f.doc + unit).strip()
         if f.wire == SERIAL:
             lines.append(
