@@ -20,15 +20,17 @@
  *    Receiving: the receiver COBS-decodes in place into rx.buf and hands out a view:
  *        dthc_frame_t f;
  *        int rc = dthc_rx_feed(&rx, byte, &f);
- *        if (rc == 1) handle(f.type, f.seq, f.payload, f.len);  read fields with dthc_get_*
+ *        if (rc == 1) handle(f.type, f.seq, f.payload, f.len);
  *        else if (rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) nak(f.seq, ...);
+ *    handle() reads the fields in place with the generated dthc_<message>_get_<field>
+ *    (dthc_messages.h), e.g. dthc_z_move_get_target_um(f.payload).
  *    f.payload points into rx.buf: use it before feeding the next byte (feed from the main
  *    loop out of a ring buffer the UART ISR fills, not from the ISR itself).
- *    Sending: build the payload with dthc_put_* straight into the transmit buffer at
+ *    Sending: build the payload with dthc_<message>_put_<field> straight into the buffer at
  *    DTHC_TX_PAYLOAD_OFFSET and encode in place, one pass, CRC computed on the way:
  *        uint8_t *p = tx + DTHC_TX_PAYLOAD_OFFSET;  (tx of DTHC_MAX_WIRE_FRAME bytes)
- *        dthc_put_u32(p, boot_id);
- *        n = dthc_encode_frame(DTHC_MSG_ACK, seq, p, 4, tx, sizeof tx);
+ *        dthc_ack_put_boot_id(p, boot_id);
+ *        n = dthc_encode_frame(DTHC_MSG_ACK, seq, p, DTHC_ACK_SIZE, tx, sizeof tx);
  *
  * 2. Messages (convenient on a host or a big MCU):
  *    Sending:   dthc_msg_t m = {DTHC_MSG_ACK, seq, {0}}; m.u.ack.boot_id = id;
