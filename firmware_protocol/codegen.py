@@ -405,6 +405,30 @@ def _c_dispatch() -> list[str]:
     return [*pack, *tail, *unpack, *tail]
 
 
+_C_KIND = {"i32": "i", "u64": "q", "f32": "f", SERIAL: "s", TAIL: "a"}
+
+
+def _c_tables() -> list[str]:
+    """X-macro lists of every message and field, for tools that walk them all."""
+    lines = [
+        "/* Every message, and every field in wire order, for code that walks them all (the",
+        " * vector_check tool prints messages with these). M(NAME, member, Class): the type",
+        " * DTHC_MSG_NAME, its dthc_msg_t.u member and its Python class; F(NAME, member, field,",
+        " * kind), kind u unsigned (bool as 0/1), i signed, q u64, f f32, s the serial, a the",
+        " * samples (n_samples of them). */",
+        "#define DTHC_FOR_EACH_MESSAGE(M) \\",
+    ]
+    lines += [f"    M({m.name}, {_struct_name(m)}, {m.cls}) \\" for m in MESSAGES]
+    lines[-1] = lines[-1].removesuffix(" \\")
+    lines.append("#define DTHC_FOR_EACH_FIELD(F) \\")
+    for m in MESSAGES:
+        for f in m.fields:
+            kind = _C_KIND.get(f.wire, "u")
+            lines.append(f"    F({m.name}, {_struct_name(m)}, {f.name}, {kind}) \\")
+    lines[-1] = lines[-1].removesuffix(" \\")
+    return lines
+
+
 def messages_h() -> str:
     out = [_C_HEAD.rstrip("\n"), ""]
     out.append(
@@ -461,6 +485,7 @@ def messages_h() -> str:
     out += ["    } u;", "} dthc_msg_t;", ""]
     out += [*_c_sizes(HOST), "", *_c_sizes(BOARD), ""]
     out += _c_dispatch()
+    out += ["", *_c_tables()]
     out += ["", "#endif /* DTHC_MESSAGES_H */", ""]
     return "\n".join(out)
 

@@ -1006,4 +1006,127 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     }
 }
 
+/* Every message, and every field in wire order, for code that walks them all (the
+ * vector_check tool prints messages with these). M(NAME, member, Class): the type
+ * DTHC_MSG_NAME, its dthc_msg_t.u member and its Python class; F(NAME, member, field,
+ * kind), kind u unsigned (bool as 0/1), i signed, q u64, f f32, s the serial, a the
+ * samples (n_samples of them). */
+#define DTHC_FOR_EACH_MESSAGE(M) \
+    M(HELLO, hello, Hello) \
+    M(HEARTBEAT, heartbeat, Heartbeat) \
+    M(SET_LEASE, set_lease, SetLease) \
+    M(TORCH, torch, Torch) \
+    M(OHMIC_SENSE, ohmic_sense, OhmicSense) \
+    M(Z_MOVE, z_move, ZMove) \
+    M(Z_PROBE, z_probe, ZProbe) \
+    M(Z_VELOCITY, z_velocity, ZVelocity) \
+    M(Z_STOP, z_stop, ZStop) \
+    M(SET_CURRENT, set_current, SetCurrent) \
+    M(CONFIGURE, configure, Configure) \
+    M(QUERY, query, Query) \
+    M(CLOCK_QUERY, clock_query, ClockQuery) \
+    M(FAULT_RESET, fault_reset, FaultReset) \
+    M(Z_PROBE_AWAY, z_probe, ZProbeAway) \
+    M(ACK, ack, Ack) \
+    M(NAK, nak, Nak) \
+    M(HELLO_INFO, hello_info, HelloInfo) \
+    M(SAMPLES, samples, Samples) \
+    M(EVENT, event, Event) \
+    M(FAULT, fault, Fault) \
+    M(MOTION_DONE, motion_done, MotionDone) \
+    M(PROBE_RESULT, probe_result, ProbeResult) \
+    M(STATUS, status, Status) \
+    M(CLOCK, clock, Clock)
+#define DTHC_FOR_EACH_FIELD(F) \
+    F(HELLO, hello, proto_major, u) \
+    F(HELLO, hello, proto_minor, u) \
+    F(HELLO, hello, host_nonce, u) \
+    F(SET_LEASE, set_lease, lease_ms, u) \
+    F(TORCH, torch, on, u) \
+    F(OHMIC_SENSE, ohmic_sense, on, u) \
+    F(Z_MOVE, z_move, target_um, i) \
+    F(Z_MOVE, z_move, feed_um_s, u) \
+    F(Z_PROBE, z_probe, feed_um_s, u) \
+    F(Z_PROBE, z_probe, max_travel_um, u) \
+    F(Z_PROBE, z_probe, sensors, u) \
+    F(Z_VELOCITY, z_velocity, stream_seq, u) \
+    F(Z_VELOCITY, z_velocity, velocity_um_s, i) \
+    F(Z_VELOCITY, z_velocity, expiry_ms, u) \
+    F(SET_CURRENT, set_current, current_da, u) \
+    F(CONFIGURE, configure, sample_rate_hz, u) \
+    F(CONFIGURE, configure, batch_size, u) \
+    F(CONFIGURE, configure, filter_kind, u) \
+    F(CONFIGURE, configure, filter_param, u) \
+    F(CONFIGURE, configure, arc_lost_ms, u) \
+    F(CONFIGURE, configure, cal_offset, i) \
+    F(CONFIGURE, configure, cal_scale, f) \
+    F(QUERY, query, what, u) \
+    F(FAULT_RESET, fault_reset, mask, u) \
+    F(Z_PROBE_AWAY, z_probe, feed_um_s, u) \
+    F(Z_PROBE_AWAY, z_probe, max_travel_um, u) \
+    F(Z_PROBE_AWAY, z_probe, sensors, u) \
+    F(ACK, ack, boot_id, u) \
+    F(NAK, nak, boot_id, u) \
+    F(NAK, nak, code, u) \
+    F(NAK, nak, detail, u) \
+    F(HELLO_INFO, hello_info, proto_major, u) \
+    F(HELLO_INFO, hello_info, proto_minor, u) \
+    F(HELLO_INFO, hello_info, fw_major, u) \
+    F(HELLO_INFO, hello_info, fw_minor, u) \
+    F(HELLO_INFO, hello_info, fw_patch, u) \
+    F(HELLO_INFO, hello_info, reset_reason, u) \
+    F(HELLO_INFO, hello_info, boot_id, u) \
+    F(HELLO_INFO, hello_info, serial, s) \
+    F(HELLO_INFO, hello_info, sample_rate_hz, u) \
+    F(HELLO_INFO, hello_info, batch_size, u) \
+    F(HELLO_INFO, hello_info, capabilities, u) \
+    F(HELLO_INFO, hello_info, z_min_um, i) \
+    F(HELLO_INFO, hello_info, z_max_um, i) \
+    F(HELLO_INFO, hello_info, max_frame, u) \
+    F(HELLO_INFO, hello_info, lease_ms, u) \
+    F(SAMPLES, samples, stream_seq, u) \
+    F(SAMPLES, samples, t0_us, u) \
+    F(SAMPLES, samples, period_us, u) \
+    F(SAMPLES, samples, z_um, i) \
+    F(SAMPLES, samples, inputs, u) \
+    F(SAMPLES, samples, zvel_seq, u) \
+    F(SAMPLES, samples, xy_speed_dmm_s, u) \
+    F(SAMPLES, samples, status, u) \
+    F(SAMPLES, samples, samples_cv, a) \
+    F(EVENT, event, counter, u) \
+    F(EVENT, event, t_us, u) \
+    F(EVENT, event, input, u) \
+    F(EVENT, event, level, u) \
+    F(EVENT, event, inputs, u) \
+    F(EVENT, event, z_um, i) \
+    F(FAULT, fault, counter, u) \
+    F(FAULT, fault, t_us, u) \
+    F(FAULT, fault, code, u) \
+    F(FAULT, fault, detail, u) \
+    F(FAULT, fault, faults, u) \
+    F(FAULT, fault, z_um, i) \
+    F(MOTION_DONE, motion_done, result, u) \
+    F(MOTION_DONE, motion_done, z_um, i) \
+    F(MOTION_DONE, motion_done, t_us, u) \
+    F(PROBE_RESULT, probe_result, result, u) \
+    F(PROBE_RESULT, probe_result, sensor, u) \
+    F(PROBE_RESULT, probe_result, contact_z_um, i) \
+    F(PROBE_RESULT, probe_result, stop_z_um, i) \
+    F(PROBE_RESULT, probe_result, t_us, u) \
+    F(STATUS, status, boot_id, u) \
+    F(STATUS, status, t_us, u) \
+    F(STATUS, status, faults, u) \
+    F(STATUS, status, inputs, u) \
+    F(STATUS, status, status, u) \
+    F(STATUS, status, lease_ms, u) \
+    F(STATUS, status, event_counter, u) \
+    F(STATUS, status, sample_seq, u) \
+    F(STATUS, status, zvel_seq, u) \
+    F(STATUS, status, z_um, i) \
+    F(STATUS, status, current_da, u) \
+    F(STATUS, status, rx_crc_errors, u) \
+    F(STATUS, status, rx_framing_errors, u) \
+    F(STATUS, status, rx_duplicates, u) \
+    F(CLOCK, clock, t_us, q)
+
 #endif /* DTHC_MESSAGES_H */
