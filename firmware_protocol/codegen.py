@@ -271,7 +271,10 @@ def _c_struct(msg: MessageDecl) -> list[str]:
             )
             lines.append(f"    uint16_t {f.name}[DTHC_MAX_SAMPLES];{_c_comment(doc)}")
         else:
-            lines.append(f"    {_c_type(f)} {f.name};{_c_comment(doc)}")
+            line = f"    {_c_type(f)} {f.name};{_c_comment(doc)}"
+            if len(line) > 100:  # the comment goes above the field
+                line = f"    /* {doc} */\n    {_c_type(f)} {f.name};"
+            lines.append(line)
     lines.append(f"}} dthc_{name}_t;")
     return lines
 
@@ -304,21 +307,29 @@ def _c_accessors(msg: MessageDecl) -> list[str]:
                 "}",
             ]
         elif f.wire == TAIL:
-            lines += [
-                f"static inline void {fn.format('put')}(uint8_t *p, uint8_t i, uint16_t v) "
-                f"{{ dthc_put_u16(p + {at} + 2 * i, v); }}",
-                f"static inline uint16_t {fn.format('get')}(const uint8_t *p, uint8_t i) "
-                f"{{ return dthc_get_u16(p + {at} + 2 * i); }}",
-            ]
+            lines += _c_function(
+                f"static inline void {fn.format('put')}(uint8_t *p, uint8_t i, uint16_t v)",
+                f"dthc_put_u16(p + {at} + 2 * i, v);",
+            )
+            lines += _c_function(
+                f"static inline uint16_t {fn.format('get')}(const uint8_t *p, uint8_t i)",
+                f"return dthc_get_u16(p + {at} + 2 * i);",
+            )
         else:
             t = _c_type(f)
             put = _C_PUT[f.wire].format(at=at, p=p)
             get = _C_GET[f.wire].format(at=at, p=p)
-            lines += [
-                f"static inline void {fn.format('put')}(uint8_t *p, {t} v) {{ {put} }}",
-                f"static inline {t} {fn.format('get')}(const uint8_t *p) {{ {get} }}",
-            ]
+            lines += _c_function(f"static inline void {fn.format('put')}(uint8_t *p, {t} v)", put)
+            lines += _c_function(f"static inline {t} {fn.format('get')}(const uint8_t *p)", get)
     return lines
+
+
+def _c_function(head: str, body: str) -> list[str]:
+    """A one-statement function: on one line when it fits 100 columns."""
+    one_line = f"{head} {{ {body} }}"
+    if len(one_line) <= 100:
+        return [one_line]
+    return [head, "{", f"    {body}", "}"]
 
 
 def _c_pack(msg: MessageDecl) -> list[str]:

@@ -113,7 +113,10 @@ typedef struct {
     bool on;
 } dthc_torch_t;
 static inline void dthc_torch_put_on(uint8_t *p, bool v) { p[0] = (uint8_t)(v ? 1u : 0u); }
-static inline bool dthc_torch_get_on(const uint8_t *p) { return p[0] != 0; /* any non-zero byte is true */ }
+static inline bool dthc_torch_get_on(const uint8_t *p)
+{
+    return p[0] != 0; /* any non-zero byte is true */
+}
 static inline void dthc_pack_torch(uint8_t *p, const dthc_torch_t *m)
 {
     dthc_torch_put_on(p, m->on);
@@ -129,7 +132,10 @@ typedef struct {
     bool on;
 } dthc_ohmic_sense_t;
 static inline void dthc_ohmic_sense_put_on(uint8_t *p, bool v) { p[0] = (uint8_t)(v ? 1u : 0u); }
-static inline bool dthc_ohmic_sense_get_on(const uint8_t *p) { return p[0] != 0; /* any non-zero byte is true */ }
+static inline bool dthc_ohmic_sense_get_on(const uint8_t *p)
+{
+    return p[0] != 0; /* any non-zero byte is true */
+}
 static inline void dthc_pack_ohmic_sense(uint8_t *p, const dthc_ohmic_sense_t *m)
 {
     dthc_ohmic_sense_put_on(p, m->on);
@@ -171,8 +177,14 @@ typedef struct {
 } dthc_z_probe_t;
 static inline void dthc_z_probe_put_feed_um_s(uint8_t *p, uint32_t v) { dthc_put_u32(p, v); }
 static inline uint32_t dthc_z_probe_get_feed_um_s(const uint8_t *p) { return dthc_get_u32(p); }
-static inline void dthc_z_probe_put_max_travel_um(uint8_t *p, uint32_t v) { dthc_put_u32(p + 4, v); }
-static inline uint32_t dthc_z_probe_get_max_travel_um(const uint8_t *p) { return dthc_get_u32(p + 4); }
+static inline void dthc_z_probe_put_max_travel_um(uint8_t *p, uint32_t v)
+{
+    dthc_put_u32(p + 4, v);
+}
+static inline uint32_t dthc_z_probe_get_max_travel_um(const uint8_t *p)
+{
+    return dthc_get_u32(p + 4);
+}
 static inline void dthc_z_probe_put_sensors(uint8_t *p, uint16_t v) { dthc_put_u16(p + 8, v); }
 static inline uint16_t dthc_z_probe_get_sensors(const uint8_t *p) { return dthc_get_u16(p + 8); }
 static inline void dthc_pack_z_probe(uint8_t *p, const dthc_z_probe_t *m)
@@ -198,10 +210,19 @@ typedef struct {
 } dthc_z_velocity_t;
 static inline void dthc_z_velocity_put_stream_seq(uint8_t *p, uint16_t v) { dthc_put_u16(p, v); }
 static inline uint16_t dthc_z_velocity_get_stream_seq(const uint8_t *p) { return dthc_get_u16(p); }
-static inline void dthc_z_velocity_put_velocity_um_s(uint8_t *p, int32_t v) { dthc_put_i32(p + 2, v); }
-static inline int32_t dthc_z_velocity_get_velocity_um_s(const uint8_t *p) { return dthc_get_i32(p + 2); }
+static inline void dthc_z_velocity_put_velocity_um_s(uint8_t *p, int32_t v)
+{
+    dthc_put_i32(p + 2, v);
+}
+static inline int32_t dthc_z_velocity_get_velocity_um_s(const uint8_t *p)
+{
+    return dthc_get_i32(p + 2);
+}
 static inline void dthc_z_velocity_put_expiry_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 6, v); }
-static inline uint16_t dthc_z_velocity_get_expiry_ms(const uint8_t *p) { return dthc_get_u16(p + 6); }
+static inline uint16_t dthc_z_velocity_get_expiry_ms(const uint8_t *p)
+{
+    return dthc_get_u16(p + 6);
+}
 static inline void dthc_pack_z_velocity(uint8_t *p, const dthc_z_velocity_t *m)
 {
     dthc_z_velocity_put_stream_seq(p, m->stream_seq);
@@ -249,17 +270,35 @@ typedef struct {
     float cal_scale; /* volts per raw count (IEEE-754 binary32) */
 } dthc_configure_t;
 static inline void dthc_configure_put_sample_rate_hz(uint8_t *p, uint16_t v) { dthc_put_u16(p, v); }
-static inline uint16_t dthc_configure_get_sample_rate_hz(const uint8_t *p) { return dthc_get_u16(p); }
+static inline uint16_t dthc_configure_get_sample_rate_hz(const uint8_t *p)
+{
+    return dthc_get_u16(p);
+}
 static inline void dthc_configure_put_batch_size(uint8_t *p, uint8_t v) { p[2] = v; }
 static inline uint8_t dthc_configure_get_batch_size(const uint8_t *p) { return p[2]; }
 static inline void dthc_configure_put_filter_kind(uint8_t *p, uint8_t v) { p[3] = v; }
 static inline uint8_t dthc_configure_get_filter_kind(const uint8_t *p) { return p[3]; }
-static inline void dthc_configure_put_filter_param(uint8_t *p, uint16_t v) { dthc_put_u16(p + 4, v); }
-static inline uint16_t dthc_configure_get_filter_param(const uint8_t *p) { return dthc_get_u16(p + 4); }
-static inline void dthc_configure_put_arc_lost_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 6, v); }
-static inline uint16_t dthc_configure_get_arc_lost_ms(const uint8_t *p) { return dthc_get_u16(p + 6); }
+static inline void dthc_configure_put_filter_param(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 4, v);
+}
+static inline uint16_t dthc_configure_get_filter_param(const uint8_t *p)
+{
+    return dthc_get_u16(p + 4);
+}
+static inline void dthc_configure_put_arc_lost_ms(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 6, v);
+}
+static inline uint16_t dthc_configure_get_arc_lost_ms(const uint8_t *p)
+{
+    return dthc_get_u16(p + 6);
+}
 static inline void dthc_configure_put_cal_offset(uint8_t *p, int32_t v) { dthc_put_i32(p + 8, v); }
-static inline int32_t dthc_configure_get_cal_offset(const uint8_t *p) { return dthc_get_i32(p + 8); }
+static inline int32_t dthc_configure_get_cal_offset(const uint8_t *p)
+{
+    return dthc_get_i32(p + 8);
+}
 static inline void dthc_configure_put_cal_scale(uint8_t *p, float v) { dthc_put_f32(p + 12, v); }
 static inline float dthc_configure_get_cal_scale(const uint8_t *p) { return dthc_get_f32(p + 12); }
 static inline void dthc_pack_configure(uint8_t *p, const dthc_configure_t *m)
@@ -423,20 +462,47 @@ static inline void dthc_hello_info_get_serial(const uint8_t *p, char *v)
     }
     v[i] = '\0';
 }
-static inline void dthc_hello_info_put_sample_rate_hz(uint8_t *p, uint16_t v) { dthc_put_u16(p + 26, v); }
-static inline uint16_t dthc_hello_info_get_sample_rate_hz(const uint8_t *p) { return dthc_get_u16(p + 26); }
+static inline void dthc_hello_info_put_sample_rate_hz(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 26, v);
+}
+static inline uint16_t dthc_hello_info_get_sample_rate_hz(const uint8_t *p)
+{
+    return dthc_get_u16(p + 26);
+}
 static inline void dthc_hello_info_put_batch_size(uint8_t *p, uint8_t v) { p[28] = v; }
 static inline uint8_t dthc_hello_info_get_batch_size(const uint8_t *p) { return p[28]; }
-static inline void dthc_hello_info_put_capabilities(uint8_t *p, uint32_t v) { dthc_put_u32(p + 29, v); }
-static inline uint32_t dthc_hello_info_get_capabilities(const uint8_t *p) { return dthc_get_u32(p + 29); }
+static inline void dthc_hello_info_put_capabilities(uint8_t *p, uint32_t v)
+{
+    dthc_put_u32(p + 29, v);
+}
+static inline uint32_t dthc_hello_info_get_capabilities(const uint8_t *p)
+{
+    return dthc_get_u32(p + 29);
+}
 static inline void dthc_hello_info_put_z_min_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 33, v); }
-static inline int32_t dthc_hello_info_get_z_min_um(const uint8_t *p) { return dthc_get_i32(p + 33); }
+static inline int32_t dthc_hello_info_get_z_min_um(const uint8_t *p)
+{
+    return dthc_get_i32(p + 33);
+}
 static inline void dthc_hello_info_put_z_max_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 37, v); }
-static inline int32_t dthc_hello_info_get_z_max_um(const uint8_t *p) { return dthc_get_i32(p + 37); }
-static inline void dthc_hello_info_put_max_frame(uint8_t *p, uint16_t v) { dthc_put_u16(p + 41, v); }
-static inline uint16_t dthc_hello_info_get_max_frame(const uint8_t *p) { return dthc_get_u16(p + 41); }
+static inline int32_t dthc_hello_info_get_z_max_um(const uint8_t *p)
+{
+    return dthc_get_i32(p + 37);
+}
+static inline void dthc_hello_info_put_max_frame(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 41, v);
+}
+static inline uint16_t dthc_hello_info_get_max_frame(const uint8_t *p)
+{
+    return dthc_get_u16(p + 41);
+}
 static inline void dthc_hello_info_put_lease_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 43, v); }
-static inline uint16_t dthc_hello_info_get_lease_ms(const uint8_t *p) { return dthc_get_u16(p + 43); }
+static inline uint16_t dthc_hello_info_get_lease_ms(const uint8_t *p)
+{
+    return dthc_get_u16(p + 43);
+}
 static inline void dthc_pack_hello_info(uint8_t *p, const dthc_hello_info_t *m)
 {
     dthc_hello_info_put_proto_major(p, m->proto_major);
@@ -501,12 +567,24 @@ static inline void dthc_samples_put_inputs(uint8_t *p, uint16_t v) { dthc_put_u1
 static inline uint16_t dthc_samples_get_inputs(const uint8_t *p) { return dthc_get_u16(p + 12); }
 static inline void dthc_samples_put_zvel_seq(uint8_t *p, uint16_t v) { dthc_put_u16(p + 14, v); }
 static inline uint16_t dthc_samples_get_zvel_seq(const uint8_t *p) { return dthc_get_u16(p + 14); }
-static inline void dthc_samples_put_xy_speed_dmm_s(uint8_t *p, uint16_t v) { dthc_put_u16(p + 16, v); }
-static inline uint16_t dthc_samples_get_xy_speed_dmm_s(const uint8_t *p) { return dthc_get_u16(p + 16); }
+static inline void dthc_samples_put_xy_speed_dmm_s(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 16, v);
+}
+static inline uint16_t dthc_samples_get_xy_speed_dmm_s(const uint8_t *p)
+{
+    return dthc_get_u16(p + 16);
+}
 static inline void dthc_samples_put_status(uint8_t *p, uint8_t v) { p[18] = v; }
 static inline uint8_t dthc_samples_get_status(const uint8_t *p) { return p[18]; }
-static inline void dthc_samples_put_samples_cv(uint8_t *p, uint8_t i, uint16_t v) { dthc_put_u16(p + 19 + 2 * i, v); }
-static inline uint16_t dthc_samples_get_samples_cv(const uint8_t *p, uint8_t i) { return dthc_get_u16(p + 19 + 2 * i); }
+static inline void dthc_samples_put_samples_cv(uint8_t *p, uint8_t i, uint16_t v)
+{
+    dthc_put_u16(p + 19 + 2 * i, v);
+}
+static inline uint16_t dthc_samples_get_samples_cv(const uint8_t *p, uint8_t i)
+{
+    return dthc_get_u16(p + 19 + 2 * i);
+}
 static inline void dthc_pack_samples(uint8_t *p, const dthc_samples_t *m)
 {
     uint8_t i;
@@ -654,18 +732,34 @@ static inline void dthc_unpack_motion_done(const uint8_t *p, dthc_motion_done_t 
 typedef struct {
     uint8_t result;
     uint16_t sensor; /* input bits that ended the probe (PROTOCOL.md §6.2) */
-    int32_t contact_z_um; /* Z at contact (Z_PROBE) or release (Z_PROBE_AWAY), else stop_z_um [um] */
+    /* Z at contact (Z_PROBE) or release (Z_PROBE_AWAY), else stop_z_um [um] */
+    int32_t contact_z_um;
     int32_t stop_z_um; /* [um] */
     uint32_t t_us; /* [us] */
 } dthc_probe_result_t;
 static inline void dthc_probe_result_put_result(uint8_t *p, uint8_t v) { p[0] = v; }
 static inline uint8_t dthc_probe_result_get_result(const uint8_t *p) { return p[0]; }
 static inline void dthc_probe_result_put_sensor(uint8_t *p, uint16_t v) { dthc_put_u16(p + 1, v); }
-static inline uint16_t dthc_probe_result_get_sensor(const uint8_t *p) { return dthc_get_u16(p + 1); }
-static inline void dthc_probe_result_put_contact_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 3, v); }
-static inline int32_t dthc_probe_result_get_contact_z_um(const uint8_t *p) { return dthc_get_i32(p + 3); }
-static inline void dthc_probe_result_put_stop_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 7, v); }
-static inline int32_t dthc_probe_result_get_stop_z_um(const uint8_t *p) { return dthc_get_i32(p + 7); }
+static inline uint16_t dthc_probe_result_get_sensor(const uint8_t *p)
+{
+    return dthc_get_u16(p + 1);
+}
+static inline void dthc_probe_result_put_contact_z_um(uint8_t *p, int32_t v)
+{
+    dthc_put_i32(p + 3, v);
+}
+static inline int32_t dthc_probe_result_get_contact_z_um(const uint8_t *p)
+{
+    return dthc_get_i32(p + 3);
+}
+static inline void dthc_probe_result_put_stop_z_um(uint8_t *p, int32_t v)
+{
+    dthc_put_i32(p + 7, v);
+}
+static inline int32_t dthc_probe_result_get_stop_z_um(const uint8_t *p)
+{
+    return dthc_get_i32(p + 7);
+}
 static inline void dthc_probe_result_put_t_us(uint8_t *p, uint32_t v) { dthc_put_u32(p + 11, v); }
 static inline uint32_t dthc_probe_result_get_t_us(const uint8_t *p) { return dthc_get_u32(p + 11); }
 static inline void dthc_pack_probe_result(uint8_t *p, const dthc_probe_result_t *m)
@@ -715,8 +809,14 @@ static inline void dthc_status_put_status(uint8_t *p, uint8_t v) { p[12] = v; }
 static inline uint8_t dthc_status_get_status(const uint8_t *p) { return p[12]; }
 static inline void dthc_status_put_lease_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 13, v); }
 static inline uint16_t dthc_status_get_lease_ms(const uint8_t *p) { return dthc_get_u16(p + 13); }
-static inline void dthc_status_put_event_counter(uint8_t *p, uint32_t v) { dthc_put_u32(p + 15, v); }
-static inline uint32_t dthc_status_get_event_counter(const uint8_t *p) { return dthc_get_u32(p + 15); }
+static inline void dthc_status_put_event_counter(uint8_t *p, uint32_t v)
+{
+    dthc_put_u32(p + 15, v);
+}
+static inline uint32_t dthc_status_get_event_counter(const uint8_t *p)
+{
+    return dthc_get_u32(p + 15);
+}
 static inline void dthc_status_put_sample_seq(uint8_t *p, uint16_t v) { dthc_put_u16(p + 19, v); }
 static inline uint16_t dthc_status_get_sample_seq(const uint8_t *p) { return dthc_get_u16(p + 19); }
 static inline void dthc_status_put_zvel_seq(uint8_t *p, uint16_t v) { dthc_put_u16(p + 21, v); }
@@ -725,12 +825,30 @@ static inline void dthc_status_put_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p 
 static inline int32_t dthc_status_get_z_um(const uint8_t *p) { return dthc_get_i32(p + 23); }
 static inline void dthc_status_put_current_da(uint8_t *p, uint16_t v) { dthc_put_u16(p + 27, v); }
 static inline uint16_t dthc_status_get_current_da(const uint8_t *p) { return dthc_get_u16(p + 27); }
-static inline void dthc_status_put_rx_crc_errors(uint8_t *p, uint16_t v) { dthc_put_u16(p + 29, v); }
-static inline uint16_t dthc_status_get_rx_crc_errors(const uint8_t *p) { return dthc_get_u16(p + 29); }
-static inline void dthc_status_put_rx_framing_errors(uint8_t *p, uint16_t v) { dthc_put_u16(p + 31, v); }
-static inline uint16_t dthc_status_get_rx_framing_errors(const uint8_t *p) { return dthc_get_u16(p + 31); }
-static inline void dthc_status_put_rx_duplicates(uint8_t *p, uint16_t v) { dthc_put_u16(p + 33, v); }
-static inline uint16_t dthc_status_get_rx_duplicates(const uint8_t *p) { return dthc_get_u16(p + 33); }
+static inline void dthc_status_put_rx_crc_errors(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 29, v);
+}
+static inline uint16_t dthc_status_get_rx_crc_errors(const uint8_t *p)
+{
+    return dthc_get_u16(p + 29);
+}
+static inline void dthc_status_put_rx_framing_errors(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 31, v);
+}
+static inline uint16_t dthc_status_get_rx_framing_errors(const uint8_t *p)
+{
+    return dthc_get_u16(p + 31);
+}
+static inline void dthc_status_put_rx_duplicates(uint8_t *p, uint16_t v)
+{
+    dthc_put_u16(p + 33, v);
+}
+static inline uint16_t dthc_status_get_rx_duplicates(const uint8_t *p)
+{
+    return dthc_get_u16(p + 33);
+}
 static inline void dthc_pack_status(uint8_t *p, const dthc_status_t *m)
 {
     dthc_status_put_boot_id(p, m->boot_id);
