@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware codegen clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -60,6 +60,12 @@ firmware: avr-tools
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/python -m firmware_protocol.codegen --check
+
+# After changing a message in firmware_protocol/declaration.py: regenerate messages.py,
+# MsgType and firmware_protocol/c/dthc_messages.h (STYLE 21: messages declared once).
+codegen: $(STAMP)
+	$(BIN)/python -m firmware_protocol.codegen
 
 typecheck: $(STAMP)
 	$(BIN)/mypy

@@ -25,34 +25,7 @@ from .errors import (
     FrameTooLong,
     UnknownMessageType,
 )
-from .messages import (
-    Ack,
-    Clock,
-    ClockQuery,
-    Configure,
-    Event,
-    Fault,
-    FaultReset,
-    Heartbeat,
-    Hello,
-    HelloInfo,
-    Message,
-    MotionDone,
-    Nak,
-    OhmicSense,
-    ProbeResult,
-    Query,
-    Samples,
-    SetCurrent,
-    SetLease,
-    Status,
-    Torch,
-    ZMove,
-    ZProbe,
-    ZProbeAway,
-    ZStop,
-    ZVelocity,
-)
+from .messages import LAYOUTS, HelloInfo, Message, Samples
 
 __all__ = [
     "LAYOUTS",
@@ -71,36 +44,6 @@ def crc16(data: bytes | bytearray | memoryview) -> int:
     """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0)."""
     return crc_hqx(data, CRC_INIT)
 
-
-# Payload layouts after the two header bytes, little-endian. The order of the codes is the
-# order of the NamedTuple fields after ``seq``. HELLO_INFO and SAMPLES have their own code.
-LAYOUTS: Final[dict[type[Any], tuple[MsgType, str]]] = {
-    Hello: (MsgType.HELLO, "BBI"),
-    Heartbeat: (MsgType.HEARTBEAT, ""),
-    SetLease: (MsgType.SET_LEASE, "H"),
-    Torch: (MsgType.TORCH, "?"),
-    OhmicSense: (MsgType.OHMIC_SENSE, "?"),
-    ZMove: (MsgType.Z_MOVE, "iI"),
-    ZProbe: (MsgType.Z_PROBE, "IIH"),
-    ZVelocity: (MsgType.Z_VELOCITY, "HiH"),
-    ZStop: (MsgType.Z_STOP, ""),
-    SetCurrent: (MsgType.SET_CURRENT, "H"),
-    Configure: (MsgType.CONFIGURE, "HBBHHif"),
-    Query: (MsgType.QUERY, "B"),
-    ClockQuery: (MsgType.CLOCK_QUERY, ""),
-    FaultReset: (MsgType.FAULT_RESET, "H"),
-    ZProbeAway: (MsgType.Z_PROBE_AWAY, "IIH"),
-    Ack: (MsgType.ACK, "I"),
-    Nak: (MsgType.NAK, "IBB"),
-    HelloInfo: (MsgType.HELLO_INFO, "BBBBBBI16sHBIiiHH"),
-    Samples: (MsgType.SAMPLES, "HIHiHHHB"),  # followed by N x uint16 centivolts
-    Event: (MsgType.EVENT, "IIBBHi"),
-    Fault: (MsgType.FAULT, "IIBBHi"),
-    MotionDone: (MsgType.MOTION_DONE, "BiI"),
-    ProbeResult: (MsgType.PROBE_RESULT, "BHiiI"),
-    Status: (MsgType.STATUS, "IIHHBHIHHiHHHH"),
-    Clock: (MsgType.CLOCK, "Q"),
-}
 
 _PACKERS: dict[type[Any], tuple[int, struct.Struct]] = {
     cls: (int(t), struct.Struct("<BB" + fmt)) for cls, (t, fmt) in LAYOUTS.items()

@@ -107,13 +107,13 @@ uint8_t board_lowest_fault(void)
 static void send_fault_report(uint32_t counter, uint8_t code, uint8_t detail)
 {
     uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
-    dthc_put_u32(p, counter);
-    dthc_put_u32(p + 4, B.now_us);
-    p[8] = code;
-    p[9] = detail;
-    dthc_put_u16(p + 10, B.faults);
-    dthc_put_i32(p + 12, board_z_um());
-    board_send_small(DTHC_MSG_FAULT, 0, 16);
+    dthc_fault_put_counter(p, counter);
+    dthc_fault_put_t_us(p, B.now_us);
+    dthc_fault_put_code(p, code);
+    dthc_fault_put_detail(p, detail);
+    dthc_fault_put_faults(p, B.faults);
+    dthc_fault_put_z_um(p, board_z_um());
+    board_send_small(DTHC_MSG_FAULT, 0, DTHC_FAULT_SIZE);
 }
 
 static void send_fault(uint8_t code, uint8_t detail)
@@ -164,13 +164,13 @@ static void read_inputs(void)
         /* One EVENT per edge, raw: the host debounces. */
         p = BOARD_SMALL_PAYLOAD_AT;
         B.event_counter++;
-        dthc_put_u32(p, B.event_counter);
-        dthc_put_u32(p + 4, B.now_us);
-        p[8] = bit;
-        p[9] = (uint8_t)((now >> bit) & 1u);
-        dthc_put_u16(p + 10, now);
-        dthc_put_i32(p + 12, board_z_um());
-        board_send_small(DTHC_MSG_EVENT, 0, 16);
+        dthc_event_put_counter(p, B.event_counter);
+        dthc_event_put_t_us(p, B.now_us);
+        dthc_event_put_input(p, bit);
+        dthc_event_put_level(p, (uint8_t)((now >> bit) & 1u));
+        dthc_event_put_inputs(p, now);
+        dthc_event_put_z_um(p, board_z_um());
+        board_send_small(DTHC_MSG_EVENT, 0, DTHC_EVENT_SIZE);
     }
 }
 
@@ -340,14 +340,14 @@ static void send_batch(void)
 {
     uint8_t *p = SAMPLES_AT;
     uint8_t len = (uint8_t)(DTHC_SAMPLES_HEADER_SIZE + 2u * B.n_batch);
-    dthc_put_u16(p, B.sample_seq);
-    dthc_put_u32(p + 2, B.batch_t0_us);
-    dthc_put_u16(p + 6, B.period_us);
-    dthc_put_i32(p + 8, board_z_um());
-    dthc_put_u16(p + 12, B.inputs);
-    dthc_put_u16(p + 14, B.zvel_seq);
-    dthc_put_u16(p + 16, DTHC_XY_SPEED_UNKNOWN);
-    p[18] = board_status_bits();
+    dthc_samples_put_stream_seq(p, B.sample_seq);
+    dthc_samples_put_t0_us(p, B.batch_t0_us);
+    dthc_samples_put_period_us(p, B.period_us);
+    dthc_samples_put_z_um(p, board_z_um());
+    dthc_samples_put_inputs(p, B.inputs);
+    dthc_samples_put_zvel_seq(p, B.zvel_seq);
+    dthc_samples_put_xy_speed_dmm_s(p, DTHC_XY_SPEED_UNKNOWN);
+    dthc_samples_put_status(p, board_status_bits());
     if (!samples_ready_len) {
         samples_ready_len = len;
         samples_fill ^= 1u;
@@ -439,7 +439,7 @@ static void sample(void)
     if (!B.n_batch) {
         B.batch_t0_us = B.now_us;
     }
-    dthc_put_u16(SAMPLES_AT + DTHC_SAMPLES_HEADER_SIZE + 2u * B.n_batch, (uint16_t)cv);
+    dthc_samples_put_samples_cv(SAMPLES_AT, B.n_batch, (uint16_t)cv);
     B.n_batch++;
     if (B.n_batch >= B.batch_size) {
         send_batch();
@@ -473,17 +473,15 @@ static bool set_scale(float scale)
 
 bool board_configure(const uint8_t *p, uint8_t *bad_field)
 {
-    uint16_t rate = dthc_get_u16(p);
-    uint8_t batch = p[2];
-    uint8_t kind = p[3];
-    uint16_t param = dthc_get_u16(p + 4);
-    uint16_t arc_lost = dthc_get_u16(p + 6);
-    int32_t offset = dthc_get_i32(p + 8);
-    uint32_t bits = dthc_get_u32(p + 12);
-    float scale;
+    uint16_t rate = dthc_configure_get_sample_rate_hz(p);
+    uint8_t batch = dthc_configure_get_batch_size(p);
+    uint8_t kind = dthc_configure_get_filter_kind(p);
+    uint16_t param = dthc_configure_get_filter_param(p);
+    uint16_t arc_lost = dthc_configure_get_arc_lost_ms(p);
+    int32_t offset = dthc_configure_get_cal_offset(p);
+    float scale = dthc_configure_get_cal_scale(p);
     uint32_t saved_m = B.scale_m;
     uint8_t saved_sh = B.scale_sh;
-    memcpy(&scale, &bits, sizeof scale);
     *bad_field = 0xFF;
     if (rate < DTHC_SAMPLE_RATE_MIN_HZ || rate > BOARD_MAX_RATE_HZ) {
         *bad_field = 0;

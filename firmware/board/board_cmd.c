@@ -45,14 +45,15 @@ static void finalise_boot_id(void)
 static void send_outcome(uint8_t seq, uint8_t code, uint8_t detail)
 {
     uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
-    dthc_put_u32(p, B.boot_id);
     if (!code) {
-        board_send_small(DTHC_MSG_ACK, seq, 4);
+        dthc_ack_put_boot_id(p, B.boot_id);
+        board_send_small(DTHC_MSG_ACK, seq, DTHC_ACK_SIZE);
         return;
     }
-    p[4] = code;
-    p[5] = detail;
-    board_send_small(DTHC_MSG_NAK, seq, 6);
+    dthc_nak_put_boot_id(p, B.boot_id);
+    dthc_nak_put_code(p, code);
+    dthc_nak_put_detail(p, detail);
+    board_send_small(DTHC_MSG_NAK, seq, DTHC_NAK_SIZE);
 }
 
 /* The reply of an executed command, remembered for its duplicates. */
@@ -85,24 +86,22 @@ static uint8_t hello_info(void)
 {
     uint8_t *p = QUERY_AT;
     const board_config_t *c = B.cfg;
-    size_t n = strlen(c->serial);
-    p[0] = DTHC_PROTOCOL_MAJOR;
-    p[1] = DTHC_PROTOCOL_MINOR;
-    p[2] = BOARD_FW_MAJOR;
-    p[3] = BOARD_FW_MINOR;
-    p[4] = BOARD_FW_PATCH;
-    p[5] = c->reset_reason;
-    dthc_put_u32(p + 6, B.boot_id);
-    memset(p + 10, 0, DTHC_SERIAL_LEN);
-    memcpy(p + 10, c->serial, n > DTHC_SERIAL_LEN ? DTHC_SERIAL_LEN : n);
-    dthc_put_u16(p + 26, B.rate_hz);
-    p[28] = B.batch_size;
-    dthc_put_u32(p + 29, c->capabilities);
-    dthc_put_i32(p + 33, c->z_min_um);
-    dthc_put_i32(p + 37, c->z_max_um);
-    dthc_put_u16(p + 41, DTHC_MAX_FRAME);
-    dthc_put_u16(p + 43, B.lease_ms);
-    return 45;
+    dthc_hello_info_put_proto_major(p, DTHC_PROTOCOL_MAJOR);
+    dthc_hello_info_put_proto_minor(p, DTHC_PROTOCOL_MINOR);
+    dthc_hello_info_put_fw_major(p, BOARD_FW_MAJOR);
+    dthc_hello_info_put_fw_minor(p, BOARD_FW_MINOR);
+    dthc_hello_info_put_fw_patch(p, BOARD_FW_PATCH);
+    dthc_hello_info_put_reset_reason(p, c->reset_reason);
+    dthc_hello_info_put_boot_id(p, B.boot_id);
+    dthc_hello_info_put_serial(p, c->serial);
+    dthc_hello_info_put_sample_rate_hz(p, B.rate_hz);
+    dthc_hello_info_put_batch_size(p, B.batch_size);
+    dthc_hello_info_put_capabilities(p, c->capabilities);
+    dthc_hello_info_put_z_min_um(p, c->z_min_um);
+    dthc_hello_info_put_z_max_um(p, c->z_max_um);
+    dthc_hello_info_put_max_frame(p, DTHC_MAX_FRAME);
+    dthc_hello_info_put_lease_ms(p, B.lease_ms);
+    return DTHC_HELLO_INFO_SIZE;
 }
 
 #ifdef BOARD_TIMING
@@ -128,27 +127,27 @@ static uint16_t sat16(uint32_t v)
 static uint8_t status(void)
 {
     uint8_t *p = QUERY_AT;
-    dthc_put_u32(p, B.boot_id);
-    dthc_put_u32(p + 4, hal_time_us());
-    dthc_put_u16(p + 8, B.faults);
-    dthc_put_u16(p + 10, B.inputs);
-    p[12] = board_status_bits();
-    dthc_put_u16(p + 13, B.lease_ms);
-    dthc_put_u32(p + 15, B.event_counter);
-    dthc_put_u16(p + 19, B.sample_seq);
-    dthc_put_u16(p + 21, B.zvel_seq);
-    dthc_put_i32(p + 23, board_z_um());
-    dthc_put_u16(p + 27, 0); /* current_da: no CURRENT_OUT */
-    dthc_put_u16(p + 29, sat16(board_rx.crc_errors));
-    dthc_put_u16(p + 31, sat16(board_rx.framing_errors));
-    dthc_put_u16(p + 33, B.rx_duplicates);
+    dthc_status_put_boot_id(p, B.boot_id);
+    dthc_status_put_t_us(p, hal_time_us());
+    dthc_status_put_faults(p, B.faults);
+    dthc_status_put_inputs(p, B.inputs);
+    dthc_status_put_status(p, board_status_bits());
+    dthc_status_put_lease_ms(p, B.lease_ms);
+    dthc_status_put_event_counter(p, B.event_counter);
+    dthc_status_put_sample_seq(p, B.sample_seq);
+    dthc_status_put_zvel_seq(p, B.zvel_seq);
+    dthc_status_put_z_um(p, board_z_um());
+    dthc_status_put_current_da(p, 0); /* no CURRENT_OUT */
+    dthc_status_put_rx_crc_errors(p, sat16(board_rx.crc_errors));
+    dthc_status_put_rx_framing_errors(p, sat16(board_rx.framing_errors));
+    dthc_status_put_rx_duplicates(p, B.rx_duplicates);
 #ifdef BOARD_TIMING
-    dthc_put_u16(p + 27, board_tick_max_us);
-    dthc_put_u16(p + 33, status_encode_us);
-    dthc_put_u16(p + 29, stack_unused);
-    dthc_put_u16(p + 31, board_tick_mean_us);
+    dthc_status_put_current_da(p, board_tick_max_us);
+    dthc_status_put_rx_duplicates(p, status_encode_us);
+    dthc_status_put_rx_crc_errors(p, stack_unused);
+    dthc_status_put_rx_framing_errors(p, board_tick_mean_us);
 #endif
-    return 35;
+    return DTHC_STATUS_SIZE;
 }
 
 /* Encode and queue a query reply (snapshotted under the lock) with the tick running
@@ -171,7 +170,7 @@ static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
 static void cmd_hello(uint8_t seq, const uint8_t *p)
 {
     send_query_reply(DTHC_MSG_HELLO_INFO, seq, hello_info());
-    if (p[0] != DTHC_PROTOCOL_MAJOR) {
+    if (dthc_hello_get_proto_major(p) != DTHC_PROTOCOL_MAJOR) {
         B.session = false; /* the host can read what the board speaks, and stops there */
         return;
     }
@@ -208,8 +207,8 @@ static void cmd_query(uint8_t seq, uint8_t what)
 
 static void cmd_z_velocity(const uint8_t *p)
 {
-    uint16_t stream_seq = dthc_get_u16(p);
-    uint16_t expiry_ms = dthc_get_u16(p + 6);
+    uint16_t stream_seq = dthc_z_velocity_get_stream_seq(p);
+    uint16_t expiry_ms = dthc_z_velocity_get_expiry_ms(p);
     uint16_t delta = (uint16_t)(stream_seq - B.zvel_seq);
     if (!B.session || B.faults) {
         return;
@@ -222,13 +221,13 @@ static void cmd_z_velocity(const uint8_t *p)
     }
     B.zvel_seq = stream_seq;
     B.zvel_applied = true;
-    board_z_velocity(dthc_get_i32(p + 2), expiry_ms);
+    board_z_velocity(dthc_z_velocity_get_velocity_um_s(p), expiry_ms);
 }
 
 static void cmd_z_move(uint8_t seq, const uint8_t *p)
 {
-    int32_t target = dthc_get_i32(p);
-    uint32_t feed = dthc_get_u32(p + 4);
+    int32_t target = dthc_z_move_get_target_um(p);
+    uint32_t feed = dthc_z_move_get_feed_um_s(p);
     if (target < B.cfg->z_min_um || target > B.cfg->z_max_um) {
         reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
     } else if (feed == 0) {
@@ -245,9 +244,9 @@ static void cmd_z_move(uint8_t seq, const uint8_t *p)
  * released): one payload, one set of refusals (PROTOCOL.md section 6.1). */
 static void cmd_z_probe(uint8_t seq, const uint8_t *p, bool away)
 {
-    uint32_t feed = dthc_get_u32(p);
-    uint32_t travel = dthc_get_u32(p + 4);
-    uint16_t sensors = (uint16_t)(dthc_get_u16(p + 8) & BOARD_CONTACT_SENSORS);
+    uint32_t feed = dthc_z_probe_get_feed_um_s(p);
+    uint32_t travel = dthc_z_probe_get_max_travel_um(p);
+    uint16_t sensors = (uint16_t)(dthc_z_probe_get_sensors(p) & BOARD_CONTACT_SENSORS);
     if (B.faults) {
         reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault());
     } else if (feed == 0) {
@@ -301,7 +300,7 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         reply(seq, 0, 0);
         break;
     case DTHC_MSG_SET_LEASE: {
-        uint16_t lease = dthc_get_u16(p);
+        uint16_t lease = dthc_set_lease_get_lease_ms(p);
         if (lease < DTHC_LEASE_MIN_MS || lease > DTHC_LEASE_MAX_MS) {
             reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
         } else {
@@ -311,15 +310,15 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         break;
     }
     case DTHC_MSG_TORCH:
-        if (p[0] && B.faults) {
+        if (dthc_torch_get_on(p) && B.faults) {
             reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault());
         } else {
-            board_set_torch(p[0] != 0);
+            board_set_torch(dthc_torch_get_on(p));
             reply(seq, 0, 0);
         }
         break;
     case DTHC_MSG_OHMIC_SENSE:
-        board_set_ohmic(p[0] != 0);
+        board_set_ohmic(dthc_ohmic_sense_get_on(p));
         reply(seq, 0, 0);
         break;
     case DTHC_MSG_Z_MOVE:
@@ -349,7 +348,7 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         break;
     }
     case DTHC_MSG_FAULT_RESET:
-        cmd_fault_reset(seq, dthc_get_u16(p));
+        cmd_fault_reset(seq, dthc_fault_reset_get_mask(p));
         break;
     default: /* a board-to-host type sent to the board */
         reply(seq, DTHC_NAK_UNKNOWN_TYPE, 0);
@@ -376,11 +375,11 @@ static void frame(const dthc_frame_t *f)
         cmd_hello(f->seq, f->payload);
         return;
     case DTHC_MSG_QUERY:
-        cmd_query(f->seq, f->payload[0]);
+        cmd_query(f->seq, dthc_query_get_what(f->payload));
         return;
     case DTHC_MSG_CLOCK_QUERY:
-        dthc_put_u64(QUERY_AT, hal_time_us64());
-        send_query_reply(DTHC_MSG_CLOCK, f->seq, 8);
+        dthc_clock_put_t_us(QUERY_AT, hal_time_us64());
+        send_query_reply(DTHC_MSG_CLOCK, f->seq, DTHC_CLOCK_SIZE);
         return;
     case DTHC_MSG_Z_VELOCITY:
         cmd_z_velocity(f->payload);

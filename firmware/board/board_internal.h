@@ -16,13 +16,19 @@
 #define BOARD_FAULT_REPEAT_US ((uint32_t)DTHC_FAULT_REPEAT_MS * 1000u)
 
 /* Reports built under the tick lock (or in the tick) go through this small buffer. */
-#define BOARD_SMALL_PAYLOAD 16 /* EVENT and FAULT, the largest report */
+#define BOARD_SMALL_PAYLOAD DTHC_EVENT_SIZE /* EVENT and FAULT, the largest report */
+typedef char board_small_reports_fit[(DTHC_FAULT_SIZE <= BOARD_SMALL_PAYLOAD
+                                      && DTHC_PROBE_RESULT_SIZE <= BOARD_SMALL_PAYLOAD
+                                      && DTHC_MOTION_DONE_SIZE <= BOARD_SMALL_PAYLOAD
+                                      && DTHC_NAK_SIZE <= BOARD_SMALL_PAYLOAD) ? 1 : -1];
 #define BOARD_SMALL_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_SMALL_PAYLOAD + 6)
 /* SAMPLES, encoded in place where the samples were collected (dthc_encode_in_place). */
 #define BOARD_SAMPLES_PAYLOAD (DTHC_SAMPLES_HEADER_SIZE + 2 * BOARD_MAX_BATCH)
 #define BOARD_SAMPLES_TX (BOARD_SAMPLES_PAYLOAD + 4 + 2 + 1 + 1)
 /* Query replies (HELLO_INFO is the largest), encoded in place outside the lock. */
-#define BOARD_QUERY_PAYLOAD 45
+#define BOARD_QUERY_PAYLOAD DTHC_HELLO_INFO_SIZE
+typedef char board_query_replies_fit[(DTHC_STATUS_SIZE <= BOARD_QUERY_PAYLOAD
+                                      && DTHC_CLOCK_SIZE <= BOARD_QUERY_PAYLOAD) ? 1 : -1];
 #define BOARD_QUERY_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_QUERY_PAYLOAD + 6)
 
 typedef enum { Z_IDLE, Z_MOVE, Z_PROBE, Z_VELOCITY, Z_STOPPING } z_mode_t;

@@ -104,21 +104,21 @@ bool board_z_busy(void)
 void board_send_motion_done(void)
 {
     uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
-    p[0] = B.last_motion.result;
-    dthc_put_i32(p + 1, B.last_motion.z_um);
-    dthc_put_u32(p + 5, B.last_motion.t_us);
-    board_send_small(DTHC_MSG_MOTION_DONE, B.last_motion.seq, 9);
+    dthc_motion_done_put_result(p, B.last_motion.result);
+    dthc_motion_done_put_z_um(p, B.last_motion.z_um);
+    dthc_motion_done_put_t_us(p, B.last_motion.t_us);
+    board_send_small(DTHC_MSG_MOTION_DONE, B.last_motion.seq, DTHC_MOTION_DONE_SIZE);
 }
 
 void board_send_probe_result(void)
 {
     uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
-    p[0] = B.last_probe.result;
-    dthc_put_u16(p + 1, B.last_probe.sensor);
-    dthc_put_i32(p + 3, B.last_probe.contact_z_um);
-    dthc_put_i32(p + 7, B.last_probe.stop_z_um);
-    dthc_put_u32(p + 11, B.last_probe.t_us);
-    board_send_small(DTHC_MSG_PROBE_RESULT, B.last_probe.seq, 15);
+    dthc_probe_result_put_result(p, B.last_probe.result);
+    dthc_probe_result_put_sensor(p, B.last_probe.sensor);
+    dthc_probe_result_put_contact_z_um(p, B.last_probe.contact_z_um);
+    dthc_probe_result_put_stop_z_um(p, B.last_probe.stop_z_um);
+    dthc_probe_result_put_t_us(p, B.last_probe.t_us);
+    board_send_small(DTHC_MSG_PROBE_RESULT, B.last_probe.seq, DTHC_PROBE_RESULT_SIZE);
 }
 
 static void motion_done(uint8_t result, int32_t z_um)

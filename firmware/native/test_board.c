@@ -112,6 +112,20 @@ static const frame_t *last(uint8_t type, int seq, unsigned since)
     return found;
 }
 
+/* The result of the last MOTION_DONE (PROBE_RESULT) with seq (any, if seq < 0) sent since
+ * index `since`, or -1 if there is none. */
+static int motion_result(int seq, unsigned since)
+{
+    const frame_t *f = last(DTHC_MSG_MOTION_DONE, seq, since);
+    return f ? dthc_motion_done_get_result(f->p) : -1;
+}
+
+static int probe_result(int seq, unsigned since)
+{
+    const frame_t *f = last(DTHC_MSG_PROBE_RESULT, seq, since);
+    return f ? dthc_probe_result_get_result(f->p) : -1;
+}
+
 static unsigned count(uint8_t type, int seq, unsigned since)
 {
     unsigned i, n = 0;
@@ -133,15 +147,18 @@ static int nak_code(uint8_t seq, unsigned since, uint8_t *detail)
         return -1;
     }
     if (detail) {
-        *detail = f->p[5];
+        *detail = dthc_nak_get_detail(f->p);
     }
-    return f->p[4];
+    return dthc_nak_get_code(f->p);
 }
 
 static void hello(void)
 {
-    uint8_t p[6] = {DTHC_PROTOCOL_MAJOR, DTHC_PROTOCOL_MINOR, 1, 2, 3, 4};
-    send(DTHC_MSG_HELLO, p, 6);
+    uint8_t p[DTHC_HELLO_SIZE];
+    dthc_hello_put_proto_major(p, DTHC_PROTOCOL_MAJOR);
+    dthc_hello_put_proto_minor(p, DTHC_PROTOCOL_MINOR);
+    dthc_hello_put_host_nonce(p, 0x04030201u);
+    send(DTHC_MSG_HELLO, p, DTHC_HELLO_SIZE);
 }
 
 static uint8_t cmd_u8(uint8_t type, uint8_t v)
@@ -158,20 +175,20 @@ static uint8_t cmd_u16(uint8_t type, uint16_t v)
 
 static uint8_t z_move(int32_t target_um, uint32_t feed_um_s)
 {
-    uint8_t p[8];
-    dthc_put_i32(p, target_um);
-    dthc_put_u32(p + 4, feed_um_s);
-    return send(DTHC_MSG_Z_MOVE, p, 8);
+    uint8_t p[DTHC_Z_MOVE_SIZE];
+    dthc_z_move_put_target_um(p, target_um);
+    dthc_z_move_put_feed_um_s(p, feed_um_s);
+    return send(DTHC_MSG_Z_MOVE, p, DTHC_Z_MOVE_SIZE);
 }
 
 /* Z_PROBE and Z_PROBE_AWAY share their payload: feed, travel, sensor set. */
 static uint8_t probe_msg(uint8_t type, uint32_t feed, uint32_t travel, uint16_t sensors)
 {
-    uint8_t p[10];
-    dthc_put_u32(p, feed);
-    dthc_put_u32(p + 4, travel);
-    dthc_put_u16(p + 8, sensors);
-    return send(type, p, 10);
+    uint8_t p[DTHC_Z_PROBE_SIZE];
+    dthc_z_probe_put_feed_um_s(p, feed);
+    dthc_z_probe_put_max_travel_um(p, travel);
+    dthc_z_probe_put_sensors(p, sensors);
+    return send(type, p, DTHC_Z_PROBE_SIZE);
 }
 
 static uint8_t z_probe(uint32_t feed, uint32_t travel, uint16_t sensors)
@@ -186,27 +203,25 @@ static uint8_t z_probe_away(uint32_t feed, uint32_t travel, uint16_t sensors)
 
 static void z_velocity(uint16_t stream_seq, int32_t v, uint16_t expiry_ms)
 {
-    uint8_t p[8];
-    dthc_put_u16(p, stream_seq);
-    dthc_put_i32(p + 2, v);
-    dthc_put_u16(p + 6, expiry_ms);
-    send_raw(DTHC_MSG_Z_VELOCITY, 0, p, 8);
+    uint8_t p[DTHC_Z_VELOCITY_SIZE];
+    dthc_z_velocity_put_stream_seq(p, stream_seq);
+    dthc_z_velocity_put_velocity_um_s(p, v);
+    dthc_z_velocity_put_expiry_ms(p, expiry_ms);
+    send_raw(DTHC_MSG_Z_VELOCITY, 0, p, DTHC_Z_VELOCITY_SIZE);
 }
 
 static uint8_t configure(uint16_t rate, uint8_t batch, uint8_t kind, uint16_t param,
                          uint16_t arc_lost, int32_t offset, float scale)
 {
-    uint8_t p[16];
-    uint32_t bits;
-    memcpy(&bits, &scale, 4);
-    dthc_put_u16(p, rate);
-    p[2] = batch;
-    p[3] = kind;
-    dthc_put_u16(p + 4, param);
-    dthc_put_u16(p + 6, arc_lost);
-    dthc_put_i32(p + 8, offset);
-    dthc_put_u32(p + 12, bits);
-    return send(DTHC_MSG_CONFIGURE, p, 16);
+    uint8_t p[DTHC_CONFIGURE_SIZE];
+    dthc_configure_put_sample_rate_hz(p, rate);
+    dthc_configure_put_batch_size(p, batch);
+    dthc_configure_put_filter_kind(p, kind);
+    dthc_configure_put_filter_param(p, param);
+    dthc_configure_put_arc_lost_ms(p, arc_lost);
+    dthc_configure_put_cal_offset(p, offset);
+    dthc_configure_put_cal_scale(p, scale);
+    return send(DTHC_MSG_CONFIGURE, p, DTHC_CONFIGURE_SIZE);
 }
 
 /* A fresh STATUS. */
@@ -218,17 +233,17 @@ static const frame_t *status(void)
 
 static int32_t z_um(void)
 {
-    return dthc_get_i32(status()->p + 23);
+    return dthc_status_get_z_um(status()->p);
 }
 
 static uint16_t faults(void)
 {
-    return dthc_get_u16(status()->p + 8);
+    return dthc_status_get_faults(status()->p);
 }
 
 static uint8_t status_bits(void)
 {
-    return status()->p[12];
+    return dthc_status_get_status(status()->p);
 }
 
 #define IN(bit) (1u << DTHC_INPUT_##bit)
@@ -255,11 +270,10 @@ static int test_lease_expiry_within_one_tick(void)
     run_ms(1);
     f = last(DTHC_MSG_FAULT, -1, mark);
     CHECK(!F.torch, "torch still on one tick past the lease");
-    CHECK(f && f->p[8] == DTHC_FAULT_LEASE_EXPIRED, "no FAULT LEASE_EXPIRED");
-    CHECK(dthc_get_u32(f->p + 4) - t_last <= 251000u, "fault at %u us",
-          (unsigned)(dthc_get_u32(f->p + 4) - t_last));
-    CHECK(last(DTHC_MSG_MOTION_DONE, -1, mark)
-              && last(DTHC_MSG_MOTION_DONE, -1, mark)->p[0] == DTHC_MOTION_FAULT,
+    CHECK(f && dthc_fault_get_code(f->p) == DTHC_FAULT_LEASE_EXPIRED, "no FAULT LEASE_EXPIRED");
+    CHECK(dthc_fault_get_t_us(f->p) - t_last <= 251000u, "fault at %u us",
+          (unsigned)(dthc_fault_get_t_us(f->p) - t_last));
+    CHECK(motion_result(-1, mark) == DTHC_MOTION_FAULT,
           "the move must end with MOTION_DONE FAULT");
     run_ms(100);
     CHECK(F.rate == 0, "Z still stepping 100 ms after expiry (rate %d)", (int)F.rate);
@@ -293,8 +307,8 @@ static int test_lease_runs_from_the_frames_arrival(void)
     f = last(DTHC_MSG_FAULT, -1, mark);
     CHECK(!F.torch, "torch on %u us after the heartbeat arrived",
           (unsigned)((uint32_t)F.now_us - t_arrival));
-    CHECK(f && dthc_get_u32(f->p + 4) - t_arrival <= 251000u, "fault %u us after arrival",
-          f ? (unsigned)(dthc_get_u32(f->p + 4) - t_arrival) : 0u);
+    CHECK(f && dthc_fault_get_t_us(f->p) - t_arrival <= 251000u, "fault %u us after arrival",
+          f ? (unsigned)(dthc_fault_get_t_us(f->p) - t_arrival) : 0u);
     return 0;
 }
 
@@ -333,7 +347,7 @@ static unsigned faults_of(uint8_t code, unsigned since, const frame_t **first)
     unsigned i, n = 0;
     *first = NULL;
     for (i = since; i < n_out; i++) {
-        if (out[i].type == DTHC_MSG_FAULT && out[i].p[8] == code) {
+        if (out[i].type == DTHC_MSG_FAULT && dthc_fault_get_code(out[i].p) == code) {
             if (!n) {
                 *first = &out[i];
             }
@@ -354,20 +368,21 @@ static int test_idle_lease_lapse_reported_once_not_latched(void)
     uint32_t t_last, counter;
     uint8_t seq;
     hello();
-    counter = dthc_get_u32(status()->p + 15); /* the event counter before the lapse */
+    counter = dthc_status_get_event_counter(status()->p); /* the event counter before the lapse */
     t_last = (uint32_t)F.now_us;
     mark = n_out;
     run_ms(250);
     CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 0, "lapse reported before the lease");
     run_ms(1);
     CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "no idle lapse reported");
-    CHECK(f->p[9] == DTHC_LEASE_DETAIL_IDLE, "detail %u, want IDLE", f->p[9]);
-    CHECK(dthc_get_u16(f->p + 10) == 0, "fault set 0x%04x in the lapse report",
-          dthc_get_u16(f->p + 10));
-    CHECK(dthc_get_u32(f->p) == counter + 1, "counter %u, want %u",
-          (unsigned)dthc_get_u32(f->p), (unsigned)(counter + 1));
-    CHECK(dthc_get_u32(f->p + 4) - t_last <= 251000u, "reported at %u us",
-          (unsigned)(dthc_get_u32(f->p + 4) - t_last));
+    CHECK(dthc_fault_get_detail(f->p) == DTHC_LEASE_DETAIL_IDLE,
+          "detail %u, want IDLE", dthc_fault_get_detail(f->p));
+    CHECK(dthc_fault_get_faults(f->p) == 0, "fault set 0x%04x in the lapse report",
+          dthc_fault_get_faults(f->p));
+    CHECK(dthc_fault_get_counter(f->p) == counter + 1, "counter %u, want %u",
+          (unsigned)dthc_fault_get_counter(f->p), (unsigned)(counter + 1));
+    CHECK(dthc_fault_get_t_us(f->p) - t_last <= 251000u, "reported at %u us",
+          (unsigned)(dthc_fault_get_t_us(f->p) - t_last));
     run_ms(800); /* silent on: no re-report every 250 ms */
     CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "the idle lapse was repeated");
     CHECK(!F.torch && !F.ohmic && F.rate == 0, "outputs on or Z moving after the lapse");
@@ -397,8 +412,10 @@ static int test_idle_lease_lapse_reported_again_after_renewal(void)
     CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f2) == 0, "lease not renewed by a frame");
     run_ms(2);
     CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f2) == 1, "second lapse not reported");
-    CHECK(f2->p[9] == DTHC_LEASE_DETAIL_IDLE && dthc_get_u32(f2->p) > dthc_get_u32(f1->p),
-          "second lapse: detail %u counter %u", f2->p[9], (unsigned)dthc_get_u32(f2->p));
+    CHECK(dthc_fault_get_detail(f2->p) == DTHC_LEASE_DETAIL_IDLE
+              && dthc_fault_get_counter(f2->p) > dthc_fault_get_counter(f1->p),
+          "second lapse: detail %u counter %u", dthc_fault_get_detail(f2->p),
+          (unsigned)dthc_fault_get_counter(f2->p));
     hello();
     mark = n_out;
     run_ms(251);
@@ -442,17 +459,16 @@ static int test_lease_latches_when_not_at_rest(void)
         mark = n_out;
         run_ms(lease + 1u);
         CHECK(faults_of(DTHC_FAULT_LEASE_EXPIRED, mark, &f) == 1, "case %d: no FAULT", c);
-        CHECK(f->p[9] == DTHC_LEASE_DETAIL_LATCHED, "case %d: detail %u", c, f->p[9]);
-        CHECK(dthc_get_u16(f->p + 10) & FAULT(LEASE_EXPIRED), "case %d: not latched", c);
+        CHECK(dthc_fault_get_detail(f->p) == DTHC_LEASE_DETAIL_LATCHED,
+              "case %d: detail %u", c, dthc_fault_get_detail(f->p));
+        CHECK(dthc_fault_get_faults(f->p) & FAULT(LEASE_EXPIRED), "case %d: not latched", c);
         CHECK(!F.ohmic, "case %d: ohmic sensing on after expiry", c);
         if (c == 0) {
-            CHECK(last(DTHC_MSG_MOTION_DONE, -1, mark)
-                      && last(DTHC_MSG_MOTION_DONE, -1, mark)->p[0] == DTHC_MOTION_FAULT,
+            CHECK(motion_result(-1, mark) == DTHC_MOTION_FAULT,
                   "the move must end with MOTION_DONE FAULT");
         }
         if (c == 1 || c == 5) {
-            CHECK(last(DTHC_MSG_PROBE_RESULT, -1, mark)
-                      && last(DTHC_MSG_PROBE_RESULT, -1, mark)->p[0] == DTHC_PROBE_ABORTED,
+            CHECK(probe_result(-1, mark) == DTHC_PROBE_ABORTED,
                   "the probe must end with PROBE_RESULT ABORTED");
         }
         run_ms(300);
@@ -476,12 +492,12 @@ static int test_fault_rereported_every_250ms(void)
     run_ms(1000);
     for (i = mark; i < n_out; i++) {
         if (out[i].type == DTHC_MSG_FAULT) {
-            uint32_t t = dthc_get_u32(out[i].p + 4);
+            uint32_t t = dthc_fault_get_t_us(out[i].p);
             if (n) {
                 CHECK(t - t_prev == 250000u, "re-report after %u us", (unsigned)(t - t_prev));
-                CHECK(dthc_get_u32(out[i].p) == counter, "re-report changed the counter");
+                CHECK(dthc_fault_get_counter(out[i].p) == counter, "re-report changed the counter");
             }
-            counter = dthc_get_u32(out[i].p);
+            counter = dthc_fault_get_counter(out[i].p);
             t_prev = t;
             n++;
         }
@@ -509,7 +525,8 @@ static int test_duplicate_replayed_not_reexecuted(void)
     send_raw(DTHC_MSG_SET_LEASE, seq, lease, 2);
     CHECK(count(DTHC_MSG_NAK, seq, mark) == 2, "refused command's NAK not repeated");
     s = status();
-    CHECK(dthc_get_u16(s->p + 33) == 2, "rx_duplicates %u", dthc_get_u16(s->p + 33));
+    CHECK(dthc_status_get_rx_duplicates(s->p) == 2,
+          "rx_duplicates %u", dthc_status_get_rx_duplicates(s->p));
     /* HELLO clears the memory: the same seq executes again. */
     hello();
     mark = n_out;
@@ -552,16 +569,21 @@ static int test_no_session_refusals(void)
 static int test_hello_info_fields(void)
 {
     const frame_t *h;
+    char serial[DTHC_SERIAL_LEN + 1];
     uint8_t seq;
     hello();
     seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HELLO_INFO);
     h = last(DTHC_MSG_HELLO_INFO, seq, 0);
     CHECK(h && h->len == 45, "no HELLO_INFO");
-    CHECK(h->p[2] == 0 && h->p[3] == 1 && h->p[4] == 0, "fw version");
-    CHECK(memcmp(h->p + 10, "DTHC-TEST-0001\0\0", 16) == 0, "serial");
-    CHECK(dthc_get_u32(h->p + 29) == CONFIG.capabilities, "capabilities");
-    CHECK(!(dthc_get_u32(h->p + 29) & (DTHC_CAP_XY_SPEED | DTHC_CAP_CURRENT_OUT)), "caps");
-    CHECK(dthc_get_u16(h->p + 43) == 250, "lease");
+    CHECK(dthc_hello_info_get_fw_major(h->p) == 0 && dthc_hello_info_get_fw_minor(h->p) == 1
+              && dthc_hello_info_get_fw_patch(h->p) == 0,
+          "fw version");
+    dthc_hello_info_get_serial(h->p, serial);
+    CHECK(strcmp(serial, "DTHC-TEST-0001") == 0, "serial %s", serial);
+    CHECK(dthc_hello_info_get_capabilities(h->p) == CONFIG.capabilities, "capabilities");
+    CHECK(!(dthc_hello_info_get_capabilities(h->p) & (DTHC_CAP_XY_SPEED | DTHC_CAP_CURRENT_OUT)),
+          "caps");
+    CHECK(dthc_hello_info_get_lease_ms(h->p) == 250, "lease");
     return 0;
 }
 
@@ -589,12 +611,14 @@ static int test_probe_stops_on_contact_in_tick(void)
     run_ms(50);
     r = last(DTHC_MSG_PROBE_RESULT, seq, mark);
     CHECK(r, "no PROBE_RESULT");
-    contact = dthc_get_i32(r->p + 3);
-    CHECK(r->p[0] == DTHC_PROBE_CONTACT, "result %u", r->p[0]);
-    CHECK(dthc_get_u16(r->p + 1) == IN(FLOAT), "sensor");
+    contact = dthc_probe_result_get_contact_z_um(r->p);
+    CHECK(dthc_probe_result_get_result(r->p) == DTHC_PROBE_CONTACT,
+          "result %u", dthc_probe_result_get_result(r->p));
+    CHECK(dthc_probe_result_get_sensor(r->p) == IN(FLOAT), "sensor");
     CHECK(contact <= 60000 - 2400 && contact >= 60000 - 2600, "contact at %d", (int)contact);
-    CHECK(dthc_get_i32(r->p + 7) <= contact && dthc_get_i32(r->p + 7) >= contact - 50,
-          "stop %d vs contact %d", (int)dthc_get_i32(r->p + 7), (int)contact);
+    CHECK(dthc_probe_result_get_stop_z_um(r->p) <= contact
+              && dthc_probe_result_get_stop_z_um(r->p) >= contact - 50,
+          "stop %d vs contact %d", (int)dthc_probe_result_get_stop_z_um(r->p), (int)contact);
     CHECK(F.rate == 0, "still moving after the result");
     return 0;
 }
@@ -609,13 +633,15 @@ static int test_probe_no_contact_and_limit(void)
     seq = z_probe(20000, 3000, IN(OHMIC));
     run_ms(600);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_NO_CONTACT, "no NO_CONTACT");
-    CHECK(dthc_get_i32(r->p + 7) == 57000, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_NO_CONTACT, "no NO_CONTACT");
+    CHECK(dthc_probe_result_get_stop_z_um(r->p) == 57000,
+          "rest at %d", (int)dthc_probe_result_get_stop_z_um(r->p));
     seq = z_probe(60000, 90000, IN(OHMIC));
     run_ms(2000);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_LIMIT, "no LIMIT result");
-    CHECK(dthc_get_i32(r->p + 7) == 0, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_LIMIT, "no LIMIT result");
+    CHECK(dthc_probe_result_get_stop_z_um(r->p) == 0,
+          "rest at %d", (int)dthc_probe_result_get_stop_z_um(r->p));
     return 0;
 }
 
@@ -652,10 +678,12 @@ static int test_probe_away_stops_on_release_in_tick(void)
     run_ms(50);
     r = last(DTHC_MSG_PROBE_RESULT, seq, mark);
     CHECK(r, "no PROBE_RESULT");
-    released = dthc_get_i32(r->p + 3);
-    stop = dthc_get_i32(r->p + 7);
-    CHECK(r->p[0] == DTHC_PROBE_RELEASED, "result %u", r->p[0]);
-    CHECK(dthc_get_u16(r->p + 1) == IN(OHMIC), "sensor 0x%04x", dthc_get_u16(r->p + 1));
+    released = dthc_probe_result_get_contact_z_um(r->p);
+    stop = dthc_probe_result_get_stop_z_um(r->p);
+    CHECK(dthc_probe_result_get_result(r->p) == DTHC_PROBE_RELEASED,
+          "result %u", dthc_probe_result_get_result(r->p));
+    CHECK(dthc_probe_result_get_sensor(r->p) == IN(OHMIC),
+          "sensor 0x%04x", dthc_probe_result_get_sensor(r->p));
     CHECK(released >= 60000 + 2400 && released <= 60000 + 2600, "released at %d",
           (int)released);
     CHECK(stop >= released && stop <= released + 50, "stop %d vs release %d", (int)stop,
@@ -680,15 +708,20 @@ static int test_probe_away_no_release_limit_and_refusals(void)
     seq = z_probe_away(20000, 3000, IN(FLOAT));
     run_ms(600);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_NO_RELEASE, "no NO_RELEASE (%d)", r ? r->p[0] : -1);
-    CHECK(dthc_get_u16(r->p + 1) == IN(FLOAT), "sensor 0x%04x", dthc_get_u16(r->p + 1));
-    CHECK(dthc_get_i32(r->p + 7) == 63000, "rest at %d", (int)dthc_get_i32(r->p + 7));
-    CHECK(dthc_get_i32(r->p + 3) == 63000, "contact at %d", (int)dthc_get_i32(r->p + 3));
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_NO_RELEASE,
+          "no NO_RELEASE (%d)", r ? dthc_probe_result_get_result(r->p) : -1);
+    CHECK(dthc_probe_result_get_sensor(r->p) == IN(FLOAT),
+          "sensor 0x%04x", dthc_probe_result_get_sensor(r->p));
+    CHECK(dthc_probe_result_get_stop_z_um(r->p) == 63000,
+          "rest at %d", (int)dthc_probe_result_get_stop_z_um(r->p));
+    CHECK(dthc_probe_result_get_contact_z_um(r->p) == 63000,
+          "contact at %d", (int)dthc_probe_result_get_contact_z_um(r->p));
     seq = z_probe_away(60000, 90000, IN(FLOAT));
     run_ms(2000);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_LIMIT, "no LIMIT result");
-    CHECK(dthc_get_i32(r->p + 7) == 100000, "rest at %d", (int)dthc_get_i32(r->p + 7));
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_LIMIT, "no LIMIT result");
+    CHECK(dthc_probe_result_get_stop_z_um(r->p) == 100000,
+          "rest at %d", (int)dthc_probe_result_get_stop_z_um(r->p));
     CHECK(!faults(), "a probe away at the soft limit latched 0x%04x", faults());
     z_move(80000, 60000);
     run_ms(1000);
@@ -698,9 +731,12 @@ static int test_probe_away_no_release_limit_and_refusals(void)
     seq = z_probe_away(5000, 3000, IN(FLOAT) | IN(OHMIC));
     run_ms(5);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_RELEASED, "not RELEASED at once");
-    CHECK(dthc_get_u16(r->p + 1) == 0, "sensor 0x%04x", dthc_get_u16(r->p + 1));
-    CHECK(dthc_get_i32(r->p + 3) == z && dthc_get_i32(r->p + 7) == z, "moved");
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_RELEASED, "not RELEASED at once");
+    CHECK(dthc_probe_result_get_sensor(r->p) == 0,
+          "sensor 0x%04x", dthc_probe_result_get_sensor(r->p));
+    CHECK(dthc_probe_result_get_contact_z_um(r->p) == z
+              && dthc_probe_result_get_stop_z_um(r->p) == z,
+          "moved");
     F.inputs = IN(FLOAT);
     run_ms(1);
     seq = z_probe_away(5000, 3000, IN(FLOAT));
@@ -708,7 +744,8 @@ static int test_probe_away_no_release_limit_and_refusals(void)
     send(DTHC_MSG_Z_STOP, NULL, 0);
     run_ms(50);
     r = last(DTHC_MSG_PROBE_RESULT, seq, 0);
-    CHECK(r && r->p[0] == DTHC_PROBE_ABORTED, "Z_STOP did not abort the probe away");
+    CHECK(r && dthc_probe_result_get_result(r->p) == DTHC_PROBE_ABORTED,
+          "Z_STOP did not abort the probe away");
     CHECK(nak_code(z_probe_away(0, 3000, IN(FLOAT)), 0, &detail) == DTHC_NAK_OUT_OF_RANGE
               && detail == 0, "feed 0 accepted");
     CHECK(nak_code(z_probe_away(5000, 0, IN(FLOAT)), 0, &detail) == DTHC_NAK_OUT_OF_RANGE
@@ -733,7 +770,7 @@ static int test_z_velocity_stale_ignored_and_expiry(void)
     z_velocity(11, 3000, 40);
     run_ms(30);
     CHECK(F.rate > 0, "velocity not applied");
-    CHECK(dthc_get_u16(status()->p + 21) == 11, "zvel_seq not echoed");
+    CHECK(dthc_status_get_zvel_seq(status()->p) == 11, "zvel_seq not echoed");
     run_ms(40); /* 40 ms after seq 11: expired, decelerating */
     run_ms(20);
     CHECK(F.rate == 0 && !(status_bits() & DTHC_STATUS_Z_BUSY), "Z not stopped after expiry");
@@ -744,7 +781,7 @@ static int test_z_velocity_stale_ignored_and_expiry(void)
     run_ms(30);
     z2 = z_um();
     CHECK(z2 == z1 && F.rate == 0, "a stale Z_VELOCITY was applied");
-    CHECK(dthc_get_u16(status()->p + 21) == 11, "stale frame changed zvel_seq");
+    CHECK(dthc_status_get_zvel_seq(status()->p) == 11, "stale frame changed zvel_seq");
     z_velocity((uint16_t)(11 + 40000), 3000, 40); /* "newer" by > 32767: older */
     run_ms(10);
     CHECK(F.rate == 0, "a wrapped-older frame was applied");
@@ -767,7 +804,8 @@ static int test_soft_limit_latches_z_limit(void)
         run_ms(10);
     }
     f = last(DTHC_MSG_FAULT, -1, 0);
-    CHECK(f && f->p[8] == DTHC_FAULT_Z_LIMIT && f->p[9] == 1, "no Z_LIMIT max fault");
+    CHECK(f && dthc_fault_get_code(f->p) == DTHC_FAULT_Z_LIMIT && dthc_fault_get_detail(f->p) == 1,
+          "no Z_LIMIT max fault");
     CHECK(z_um() == 100000, "Z at %d, not at the limit", (int)z_um());
     s = faults();
     CHECK(s & FAULT(Z_LIMIT), "Z_LIMIT not latched");
@@ -796,9 +834,7 @@ static int test_move_limits_and_upward_only(void)
     seq = z_move(70000, 30000);
     CHECK(is_ack(seq, mark), "upward move refused while latched");
     run_ms(1000);
-    CHECK(last(DTHC_MSG_MOTION_DONE, seq, 0)
-              && last(DTHC_MSG_MOTION_DONE, seq, 0)->p[0] == DTHC_MOTION_REACHED,
-          "upward move not reached");
+    CHECK(motion_result(seq, 0) == DTHC_MOTION_REACHED, "upward move not reached");
     return 0;
 }
 
@@ -815,7 +851,9 @@ static int test_move_trapezoid(void)
     for (i = 0; i < 1500; i++) {
         int32_t r = F.rate;
         int32_t dr = r - prev;
-        CHECK(dr <= 131 && dr >= -131, "rate step %d steps/s in one tick (tick %u, rate %d, z %d)", (int)dr, i, (int)r, (int)F.steps);
+        CHECK(dr <= 131 && dr >= -131,
+              "rate step %d steps/s in one tick (tick %u, rate %d, z %d)",
+              (int)dr, i, (int)r, (int)F.steps);
         if (-r > max_rate) {
             max_rate = -r;
         }
@@ -823,8 +861,10 @@ static int test_move_trapezoid(void)
         run_ms(1);
     }
     done = last(DTHC_MSG_MOTION_DONE, seq, 0);
-    CHECK(done && done->p[0] == DTHC_MOTION_REACHED, "no MOTION_DONE REACHED");
-    CHECK(dthc_get_i32(done->p + 1) == 20000, "done at %d", (int)dthc_get_i32(done->p + 1));
+    CHECK(done && dthc_motion_done_get_result(done->p) == DTHC_MOTION_REACHED,
+          "no MOTION_DONE REACHED");
+    CHECK(dthc_motion_done_get_z_um(done->p) == 20000,
+          "done at %d", (int)dthc_motion_done_get_z_um(done->p));
     CHECK(max_rate == 12000, "top speed %d steps/s", (int)max_rate);
     CHECK(z_um() == 20000, "rest at %d", (int)z_um());
     return 0;
@@ -839,20 +879,15 @@ static int test_stop_supersede_query(void)
     a = z_move(90000, 20000);
     run_ms(100);
     b = z_move(10000, 20000);
-    CHECK(last(DTHC_MSG_MOTION_DONE, a, 0)
-              && last(DTHC_MSG_MOTION_DONE, a, 0)->p[0] == DTHC_MOTION_SUPERSEDED,
-          "no SUPERSEDED");
+    CHECK(motion_result(a, 0) == DTHC_MOTION_SUPERSEDED, "no SUPERSEDED");
     run_ms(100);
     stop = send(DTHC_MSG_Z_STOP, NULL, 0);
     CHECK(is_ack(stop, 0), "Z_STOP not acknowledged");
-    CHECK(last(DTHC_MSG_MOTION_DONE, b, 0)
-              && last(DTHC_MSG_MOTION_DONE, b, 0)->p[0] == DTHC_MOTION_STOPPED,
-          "no STOPPED");
+    CHECK(motion_result(b, 0) == DTHC_MOTION_STOPPED, "no STOPPED");
     run_ms(100);
     CHECK(F.rate == 0, "not stopped");
     q = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_MOTION_DONE);
-    CHECK(last(DTHC_MSG_MOTION_DONE, q, 0)
-              && last(DTHC_MSG_MOTION_DONE, q, 0)->p[0] == DTHC_MOTION_STOPPED,
+    CHECK(motion_result(q, 0) == DTHC_MOTION_STOPPED,
           "QUERY(MOTION_DONE) did not re-send with its seq");
     return 0;
 }
@@ -903,7 +938,8 @@ static int test_events_and_shared_counter(void)
     run_ms(1);
     for (i = mark; i < n_out; i++) {
         if (out[i].type == DTHC_MSG_EVENT || out[i].type == DTHC_MSG_FAULT) {
-            uint32_t c = dthc_get_u32(out[i].p);
+            uint32_t c = out[i].type == DTHC_MSG_EVENT ? dthc_event_get_counter(out[i].p)
+                                                        : dthc_fault_get_counter(out[i].p);
             CHECK(c == ++expect, "counter %u, expected %u", (unsigned)c, (unsigned)expect);
         }
     }
@@ -918,10 +954,12 @@ static int test_ohmic_only_while_sensing(void)
     hello();
     F.inputs = IN(OHMIC);
     run_ms(2);
-    CHECK(!(dthc_get_u16(status()->p + 10) & IN(OHMIC)), "ohmic contact seen with sensing off");
+    CHECK(!(dthc_status_get_inputs(status()->p) & IN(OHMIC)),
+          "ohmic contact seen with sensing off");
     cmd_u8(DTHC_MSG_OHMIC_SENSE, 1);
     run_ms(2);
-    CHECK(dthc_get_u16(status()->p + 10) & IN(OHMIC), "ohmic contact not seen with sensing on");
+    CHECK(dthc_status_get_inputs(status()->p) & IN(OHMIC),
+          "ohmic contact not seen with sensing on");
     return 0;
 }
 
@@ -950,7 +988,9 @@ static int test_configure_out_of_range(void)
     CHECK(nak_code(seq, mark, &d) == DTHC_NAK_OUT_OF_RANGE && d == 6, "scale -1");
     seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HELLO_INFO);
     h = last(DTHC_MSG_HELLO_INFO, seq, 0);
-    CHECK(dthc_get_u16(h->p + 26) == 1000 && h->p[28] == 5, "a refused CONFIGURE applied");
+    CHECK(dthc_hello_info_get_sample_rate_hz(h->p) == 1000
+              && dthc_hello_info_get_batch_size(h->p) == 5,
+          "a refused CONFIGURE applied");
     CHECK(F.period_us == 1000, "tick period changed");
     seq = configure(500, 10, 0, 0, 0, 0, 0.01f);
     CHECK(is_ack(seq, mark) && F.period_us == 2000, "valid CONFIGURE not applied");
@@ -961,7 +1001,8 @@ static int test_configure_out_of_range(void)
 static uint16_t last_sample(void)
 {
     const frame_t *s = last(DTHC_MSG_SAMPLES, -1, 0);
-    return s ? dthc_get_u16(s->p + s->len - 2) : 0xFFFF;
+    return s ? dthc_samples_get_samples_cv(s->p, (uint8_t)((s->len - DTHC_SAMPLES_SIZE) / 2 - 1))
+             : 0xFFFF;
 }
 
 static int test_calibration_and_filters(void)
@@ -975,7 +1016,8 @@ static int test_calibration_and_filters(void)
     run_ms(1);
     CHECK(last_sample() == 25000, "calibrated %u, expected 25000", last_sample());
     s = last(DTHC_MSG_SAMPLES, -1, 0);
-    CHECK(s->len == 21 && dthc_get_u16(s->p + 6) == 1000 && dthc_get_u16(s->p + 16) == 0xFFFF,
+    CHECK(s->len == DTHC_SAMPLES_SIZE + 2 && dthc_samples_get_period_us(s->p) == 1000
+              && dthc_samples_get_xy_speed_dmm_s(s->p) == DTHC_XY_SPEED_UNKNOWN,
           "SAMPLES header");
     /* moving average over 4 */
     configure(1000, 1, DTHC_FILTER_MOVING_AVERAGE, 4, 0, 0, 0.01f);
@@ -1075,9 +1117,9 @@ static int test_batches(void)
     run_ms(100);
     for (i = mark; i < n_out; i++) {
         if (out[i].type == DTHC_MSG_SAMPLES) {
-            uint32_t t0 = dthc_get_u32(out[i].p + 2);
-            uint16_t sseq = dthc_get_u16(out[i].p);
-            CHECK(out[i].len == 19 + 2 * 5, "batch of %u bytes", out[i].len);
+            uint32_t t0 = dthc_samples_get_t0_us(out[i].p);
+            uint16_t sseq = dthc_samples_get_stream_seq(out[i].p);
+            CHECK(out[i].len == DTHC_SAMPLES_SIZE + 2 * 5, "batch of %u bytes", out[i].len);
             if (n) {
                 CHECK(t0 - t_prev == 5000, "t0 step %u", (unsigned)(t0 - t_prev));
                 CHECK((uint16_t)(sseq - seq_prev) == 1, "stream_seq gap");
@@ -1104,9 +1146,11 @@ static int batches_unbroken(unsigned mark, unsigned *n)
         if (out[i].type != DTHC_MSG_SAMPLES) {
             continue;
         }
-        CHECK(!(out[i].p[18] & DTHC_STATUS_SAMPLE_OVERFLOW), "SAMPLE_OVERFLOW in batch %u", *n);
-        CHECK(!*n || (uint16_t)(dthc_get_u16(out[i].p) - seq_prev) == 1, "stream_seq gap");
-        seq_prev = dthc_get_u16(out[i].p);
+        CHECK(!(dthc_samples_get_status(out[i].p) & DTHC_STATUS_SAMPLE_OVERFLOW),
+              "SAMPLE_OVERFLOW in batch %u", *n);
+        CHECK(!*n || (uint16_t)(dthc_samples_get_stream_seq(out[i].p) - seq_prev) == 1,
+              "stream_seq gap");
+        seq_prev = dthc_samples_get_stream_seq(out[i].p);
         (*n)++;
     }
     return 0;
@@ -1215,12 +1259,13 @@ static int test_limit_switch_stops_and_latches(void)
     run_ms(1);
     steps = F.steps;
     f = last(DTHC_MSG_FAULT, -1, 0);
-    CHECK(f && f->p[8] == DTHC_FAULT_Z_LIMIT && f->p[9] == 0, "no Z_LIMIT min fault");
+    CHECK(f && dthc_fault_get_code(f->p) == DTHC_FAULT_Z_LIMIT && dthc_fault_get_detail(f->p) == 0,
+          "no Z_LIMIT min fault");
     CHECK(F.lo == steps, "the step generator may still step down (lo %d, at %d)", (int)F.lo,
           (int)steps);
     run_ms(50);
     CHECK(F.steps == steps, "Z moved %d steps past the switch", (int)(steps - F.steps));
-    seq = z_move(dthc_get_i32(status()->p + 23) + 5000, 20000);
+    seq = z_move(dthc_status_get_z_um(status()->p) + 5000, 20000);
     CHECK(is_ack(seq, 0), "moving up off the switch refused");
     F.inputs = 0;
     run_ms(600);

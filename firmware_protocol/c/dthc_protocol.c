@@ -81,47 +81,20 @@ uint16_t dthc_crc16(const uint8_t *data, size_t len)
 
 /* --- message table ------------------------------------------------------------------------ */
 
-/* Payload sizes by type, host-to-board types from 0x01, board-to-host from 0x80; 0xFF for a
- * gap. Explicit tables in flash, not a switch: gcc turns such a switch into a 137-byte lookup
- * table that avr-gcc puts in RAM. */
-#define DTHC_NO_TYPE 0xFFu
-static const uint8_t dthc_host_sizes[DTHC_MSG_Z_PROBE_AWAY] DTHC_FLASH_ATTR = {
-    6,  /* 0x01 HELLO */
-    0,  /* 0x02 HEARTBEAT */
-    2,  /* 0x03 SET_LEASE */
-    1,  /* 0x04 TORCH */
-    1,  /* 0x05 OHMIC_SENSE */
-    8,  /* 0x06 Z_MOVE */
-    10, /* 0x07 Z_PROBE */
-    8,  /* 0x08 Z_VELOCITY */
-    0,  /* 0x09 Z_STOP */
-    2,  /* 0x0A SET_CURRENT */
-    16, /* 0x0B CONFIGURE */
-    1,  /* 0x0C QUERY */
-    0,  /* 0x0D CLOCK_QUERY */
-    2,  /* 0x0E FAULT_RESET */
-    10, /* 0x0F Z_PROBE_AWAY */
-};
-static const uint8_t dthc_board_sizes[DTHC_MSG_CLOCK - DTHC_MSG_ACK + 1] DTHC_FLASH_ATTR = {
-    4,                        /* 0x80 ACK */
-    6,                        /* 0x81 NAK */
-    45,                       /* 0x82 HELLO_INFO */
-    DTHC_SAMPLES_HEADER_SIZE, /* 0x83 SAMPLES: the fixed part */
-    16,                       /* 0x84 EVENT */
-    16,                       /* 0x85 FAULT */
-    9,                        /* 0x86 MOTION_DONE */
-    15,                       /* 0x87 PROBE_RESULT */
-    35,                       /* 0x88 STATUS */
-    8,                        /* 0x89 CLOCK */
-};
+/* Payload sizes by type (generated from the declaration), in flash: not a switch, which gcc
+ * turns into a 137-byte lookup table that avr-gcc puts in RAM. */
+static const uint8_t dthc_host_sizes[DTHC_HOST_SIZES_LAST - DTHC_HOST_SIZES_FIRST + 1]
+    DTHC_FLASH_ATTR = DTHC_HOST_SIZES;
+static const uint8_t dthc_board_sizes[DTHC_BOARD_SIZES_LAST - DTHC_BOARD_SIZES_FIRST + 1]
+    DTHC_FLASH_ATTR = DTHC_BOARD_SIZES;
 
 int dthc_payload_size(uint8_t type)
 {
     uint8_t size = DTHC_NO_TYPE;
-    if (type >= DTHC_MSG_HELLO && type <= DTHC_MSG_Z_PROBE_AWAY) {
-        size = DTHC_FLASH_READ_BYTE(&dthc_host_sizes[type - DTHC_MSG_HELLO]);
-    } else if (type >= DTHC_MSG_ACK && type <= DTHC_MSG_CLOCK) {
-        size = DTHC_FLASH_READ_BYTE(&dthc_board_sizes[type - DTHC_MSG_ACK]);
+    if (type >= DTHC_HOST_SIZES_FIRST && type <= DTHC_HOST_SIZES_LAST) {
+        size = DTHC_FLASH_READ_BYTE(&dthc_host_sizes[type - DTHC_HOST_SIZES_FIRST]);
+    } else if (type >= DTHC_BOARD_SIZES_FIRST && type <= DTHC_BOARD_SIZES_LAST) {
+        size = DTHC_FLASH_READ_BYTE(&dthc_board_sizes[type - DTHC_BOARD_SIZES_FIRST]);
     }
     return size == DTHC_NO_TYPE ? -1 : (int)size;
 }
@@ -485,70 +458,9 @@ void dthc_frame_stream(const uint8_t *buf, size_t len, dthc_sink_fn sink)
     sink(&delimiter, 1);
 }
 
-/* --- field serialisation ------------------------------------------------------------------
- * A sink receives the body bytes one at a time into a plain buffer, bounds-checked. */
-
-typedef struct {
-    uint8_t *buf;
-    size_t cap;
-    size_t n;
-    bool ok;
-} sink_t;
-
-static void sink_init(sink_t *s, uint8_t *buf, size_t cap)
-{
-    s->buf = buf;
-    s->cap = cap;
-    s->n = 0;
-    s->ok = true;
-}
-
-static void put_u8(sink_t *s, uint8_t b)
-{
-    if (s->n < s->cap) {
-        s->buf[s->n] = b;
-    } else {
-        s->ok = false;
-    }
-    s->n++;
-}
-
-static void put_u16(sink_t *s, uint16_t v)
-{
-    put_u8(s, (uint8_t)(v & 0xFFu));
-    put_u8(s, (uint8_t)(v >> 8));
-}
-
-static void put_u32(sink_t *s, uint32_t v)
-{
-    put_u8(s, (uint8_t)(v & 0xFFu));
-    put_u8(s, (uint8_t)((v >> 8) & 0xFFu));
-    put_u8(s, (uint8_t)((v >> 16) & 0xFFu));
-    put_u8(s, (uint8_t)(v >> 24));
-}
-
-static void put_i32(sink_t *s, int32_t v)
-{
-    put_u32(s, (uint32_t)v); /* modulo 2^32: two's complement bytes on every host */
-}
-
-static void put_u64(sink_t *s, uint64_t v)
-{
-    put_u32(s, (uint32_t)(v & 0xFFFFFFFFu));
-    put_u32(s, (uint32_t)(v >> 32));
-}
-
-static void put_f32(sink_t *s, float f)
-{
-    uint32_t bits;
-    memcpy(&bits, &f, sizeof bits);
-    put_u32(s, bits);
-}
-
-static void put_bool(sink_t *s, bool v)
-{
-    put_u8(s, (uint8_t)(v ? 1u : 0u));
-}
+/* --- messages ------------------------------------------------------------------------------
+ * The payload of each message is packed and unpacked by the code generated from
+ * firmware_protocol/declaration.py (dthc_messages.h: dthc_pack_payload, dthc_unpack_payload). */
 
 /* Length of the serial before its NUL, or DTHC_SERIAL_LEN + 1 if it has none in time. */
 static size_t serial_len(const char *serial)
@@ -576,210 +488,48 @@ static bool msg_encodable(const dthc_msg_t *msg)
     return true;
 }
 
-/* The payload fields of `msg` (no type, no seq). */
-static void put_payload(sink_t *s, const dthc_msg_t *msg)
+/* The payload length of an encodable `msg`. */
+static size_t payload_len(const dthc_msg_t *msg)
 {
-    size_t i;
-    switch (msg->type) {
-    case DTHC_MSG_HELLO: {
-        const dthc_hello_t *p = &msg->u.hello;
-        put_u8(s, p->proto_major);
-        put_u8(s, p->proto_minor);
-        put_u32(s, p->host_nonce);
-        break;
+    if (msg->type == DTHC_MSG_SAMPLES) {
+        return DTHC_SAMPLES_HEADER_SIZE + 2u * (size_t)msg->u.samples.n_samples;
     }
-    case DTHC_MSG_HEARTBEAT:
-    case DTHC_MSG_Z_STOP:
-    case DTHC_MSG_CLOCK_QUERY:
-        break;
-    case DTHC_MSG_SET_LEASE:
-        put_u16(s, msg->u.set_lease.lease_ms);
-        break;
-    case DTHC_MSG_TORCH:
-        put_bool(s, msg->u.torch.on);
-        break;
-    case DTHC_MSG_OHMIC_SENSE:
-        put_bool(s, msg->u.ohmic_sense.on);
-        break;
-    case DTHC_MSG_Z_MOVE:
-        put_i32(s, msg->u.z_move.target_um);
-        put_u32(s, msg->u.z_move.feed_um_s);
-        break;
-    case DTHC_MSG_Z_PROBE:
-    case DTHC_MSG_Z_PROBE_AWAY:
-        put_u32(s, msg->u.z_probe.feed_um_s);
-        put_u32(s, msg->u.z_probe.max_travel_um);
-        put_u16(s, msg->u.z_probe.sensors);
-        break;
-    case DTHC_MSG_Z_VELOCITY:
-        put_u16(s, msg->u.z_velocity.stream_seq);
-        put_i32(s, msg->u.z_velocity.velocity_um_s);
-        put_u16(s, msg->u.z_velocity.expiry_ms);
-        break;
-    case DTHC_MSG_SET_CURRENT:
-        put_u16(s, msg->u.set_current.current_da);
-        break;
-    case DTHC_MSG_CONFIGURE: {
-        const dthc_configure_t *p = &msg->u.configure;
-        put_u16(s, p->sample_rate_hz);
-        put_u8(s, p->batch_size);
-        put_u8(s, p->filter_kind);
-        put_u16(s, p->filter_param);
-        put_u16(s, p->arc_lost_ms);
-        put_i32(s, p->cal_offset);
-        put_f32(s, p->cal_scale);
-        break;
-    }
-    case DTHC_MSG_QUERY:
-        put_u8(s, msg->u.query.what);
-        break;
-    case DTHC_MSG_FAULT_RESET:
-        put_u16(s, msg->u.fault_reset.mask);
-        break;
-    case DTHC_MSG_ACK:
-        put_u32(s, msg->u.ack.boot_id);
-        break;
-    case DTHC_MSG_NAK:
-        put_u32(s, msg->u.nak.boot_id);
-        put_u8(s, msg->u.nak.code);
-        put_u8(s, msg->u.nak.detail);
-        break;
-    case DTHC_MSG_HELLO_INFO: {
-        const dthc_hello_info_t *p = &msg->u.hello_info;
-        size_t n = serial_len(p->serial);
-        put_u8(s, p->proto_major);
-        put_u8(s, p->proto_minor);
-        put_u8(s, p->fw_major);
-        put_u8(s, p->fw_minor);
-        put_u8(s, p->fw_patch);
-        put_u8(s, p->reset_reason);
-        put_u32(s, p->boot_id);
-        for (i = 0; i < DTHC_SERIAL_LEN; i++) {
-            put_u8(s, (uint8_t)(i < n ? (unsigned char)p->serial[i] : 0u));
-        }
-        put_u16(s, p->sample_rate_hz);
-        put_u8(s, p->batch_size);
-        put_u32(s, p->capabilities);
-        put_i32(s, p->z_min_um);
-        put_i32(s, p->z_max_um);
-        put_u16(s, p->max_frame);
-        put_u16(s, p->lease_ms);
-        break;
-    }
-    case DTHC_MSG_SAMPLES: {
-        const dthc_samples_t *p = &msg->u.samples;
-        put_u16(s, p->stream_seq);
-        put_u32(s, p->t0_us);
-        put_u16(s, p->period_us);
-        put_i32(s, p->z_um);
-        put_u16(s, p->inputs);
-        put_u16(s, p->zvel_seq);
-        put_u16(s, p->xy_speed_dmm_s);
-        put_u8(s, p->status);
-        for (i = 0; i < p->n_samples; i++) {
-            put_u16(s, p->samples_cv[i]);
-        }
-        break;
-    }
-    case DTHC_MSG_EVENT: {
-        const dthc_event_t *p = &msg->u.event;
-        put_u32(s, p->counter);
-        put_u32(s, p->t_us);
-        put_u8(s, p->input);
-        put_u8(s, p->level);
-        put_u16(s, p->inputs);
-        put_i32(s, p->z_um);
-        break;
-    }
-    case DTHC_MSG_FAULT: {
-        const dthc_fault_t *p = &msg->u.fault;
-        put_u32(s, p->counter);
-        put_u32(s, p->t_us);
-        put_u8(s, p->code);
-        put_u8(s, p->detail);
-        put_u16(s, p->faults);
-        put_i32(s, p->z_um);
-        break;
-    }
-    case DTHC_MSG_MOTION_DONE:
-        put_u8(s, msg->u.motion_done.result);
-        put_i32(s, msg->u.motion_done.z_um);
-        put_u32(s, msg->u.motion_done.t_us);
-        break;
-    case DTHC_MSG_PROBE_RESULT: {
-        const dthc_probe_result_t *p = &msg->u.probe_result;
-        put_u8(s, p->result);
-        put_u16(s, p->sensor);
-        put_i32(s, p->contact_z_um);
-        put_i32(s, p->stop_z_um);
-        put_u32(s, p->t_us);
-        break;
-    }
-    case DTHC_MSG_STATUS: {
-        const dthc_status_t *p = &msg->u.status;
-        put_u32(s, p->boot_id);
-        put_u32(s, p->t_us);
-        put_u16(s, p->faults);
-        put_u16(s, p->inputs);
-        put_u8(s, p->status);
-        put_u16(s, p->lease_ms);
-        put_u32(s, p->event_counter);
-        put_u16(s, p->sample_seq);
-        put_u16(s, p->zvel_seq);
-        put_i32(s, p->z_um);
-        put_u16(s, p->current_da);
-        put_u16(s, p->rx_crc_errors);
-        put_u16(s, p->rx_framing_errors);
-        put_u16(s, p->rx_duplicates);
-        break;
-    }
-    case DTHC_MSG_CLOCK:
-        put_u64(s, msg->u.clock.t_us);
-        break;
-    default:
-        s->ok = false; /* unreachable after msg_encodable() */
-        break;
-    }
+    return (size_t)dthc_payload_size(msg->type);
 }
 
 size_t dthc_encode_body(const dthc_msg_t *msg, uint8_t *out, size_t cap)
 {
-    sink_t s;
+    size_t n;
     if (msg == NULL || out == NULL || !msg_encodable(msg)) {
         return 0;
     }
-    sink_init(&s, out, cap);
-    put_u8(&s, msg->type);
-    put_u8(&s, msg->seq);
-    put_payload(&s, msg);
-    return s.ok ? s.n : 0;
+    n = payload_len(msg);
+    if (cap < n + 2) {
+        return 0;
+    }
+    out[0] = msg->type;
+    out[1] = msg->seq;
+    dthc_pack_payload(out + 2, msg);
+    return n + 2;
 }
 
 size_t dthc_encode(const dthc_msg_t *msg, uint8_t *out, size_t cap)
 {
-    sink_t s;
+    size_t n;
     if (msg == NULL || out == NULL || !msg_encodable(msg) || cap <= DTHC_TX_PAYLOAD_OFFSET) {
         return 0;
     }
     /* Pack the payload where dthc_encode_frame may read it in place: no body buffer. A
      * payload that does not fit there cannot fit as a wire frame either (6 bytes more). */
-    sink_init(&s, out + DTHC_TX_PAYLOAD_OFFSET, cap - DTHC_TX_PAYLOAD_OFFSET);
-    put_payload(&s, msg);
-    if (!s.ok) {
+    n = payload_len(msg);
+    if (n > cap - DTHC_TX_PAYLOAD_OFFSET) {
         return 0;
     }
-    return dthc_encode_frame(msg->type, msg->seq, out + DTHC_TX_PAYLOAD_OFFSET, s.n, out, cap);
+    dthc_pack_payload(out + DTHC_TX_PAYLOAD_OFFSET, msg);
+    return dthc_encode_frame(msg->type, msg->seq, out + DTHC_TX_PAYLOAD_OFFSET, n, out, cap);
 }
 
 /* --- field parsing -------------------------------------------------------------------------- */
-
-static float get_f32(const uint8_t *p)
-{
-    uint32_t bits = dthc_get_u32(p);
-    float f;
-    memcpy(&f, &bits, sizeof f);
-    return f;
-}
 
 /* Type and exact payload length (PROTOCOL.md section 2, the last two checks). */
 static int check_payload(uint8_t type, size_t payload)
@@ -805,7 +555,6 @@ int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out)
 {
     const uint8_t *p;
     size_t payload;
-    size_t i;
     dthc_msg_t *m = out;
     int rc;
 
@@ -822,164 +571,7 @@ int dthc_frame_to_msg(const dthc_frame_t *frame, dthc_msg_t *out)
     memset(m, 0, sizeof *m);
     m->type = frame->type;
     m->seq = frame->seq;
-    switch (m->type) {
-    case DTHC_MSG_HELLO:
-        m->u.hello.proto_major = p[0];
-        m->u.hello.proto_minor = p[1];
-        m->u.hello.host_nonce = dthc_get_u32(p + 2);
-        break;
-    case DTHC_MSG_HEARTBEAT:
-    case DTHC_MSG_Z_STOP:
-    case DTHC_MSG_CLOCK_QUERY:
-        break;
-    case DTHC_MSG_SET_LEASE:
-        m->u.set_lease.lease_ms = dthc_get_u16(p);
-        break;
-    case DTHC_MSG_TORCH:
-        m->u.torch.on = p[0] != 0; /* any non-zero byte is true */
-        break;
-    case DTHC_MSG_OHMIC_SENSE:
-        m->u.ohmic_sense.on = p[0] != 0;
-        break;
-    case DTHC_MSG_Z_MOVE:
-        m->u.z_move.target_um = dthc_get_i32(p);
-        m->u.z_move.feed_um_s = dthc_get_u32(p + 4);
-        break;
-    case DTHC_MSG_Z_PROBE:
-    case DTHC_MSG_Z_PROBE_AWAY:
-        m->u.z_probe.feed_um_s = dthc_get_u32(p);
-        m->u.z_probe.max_travel_um = dthc_get_u32(p + 4);
-        m->u.z_probe.sensors = dthc_get_u16(p + 8);
-        break;
-    case DTHC_MSG_Z_VELOCITY:
-        m->u.z_velocity.stream_seq = dthc_get_u16(p);
-        m->u.z_velocity.velocity_um_s = dthc_get_i32(p + 2);
-        m->u.z_velocity.expiry_ms = dthc_get_u16(p + 6);
-        break;
-    case DTHC_MSG_SET_CURRENT:
-        m->u.set_current.current_da = dthc_get_u16(p);
-        break;
-    case DTHC_MSG_CONFIGURE: {
-        dthc_configure_t *c = &m->u.configure;
-        c->sample_rate_hz = dthc_get_u16(p);
-        c->batch_size = p[2];
-        c->filter_kind = p[3];
-        c->filter_param = dthc_get_u16(p + 4);
-        c->arc_lost_ms = dthc_get_u16(p + 6);
-        c->cal_offset = dthc_get_i32(p + 8);
-        c->cal_scale = get_f32(p + 12);
-        break;
-    }
-    case DTHC_MSG_QUERY:
-        m->u.query.what = p[0];
-        break;
-    case DTHC_MSG_FAULT_RESET:
-        m->u.fault_reset.mask = dthc_get_u16(p);
-        break;
-    case DTHC_MSG_ACK:
-        m->u.ack.boot_id = dthc_get_u32(p);
-        break;
-    case DTHC_MSG_NAK:
-        m->u.nak.boot_id = dthc_get_u32(p);
-        m->u.nak.code = p[4];
-        m->u.nak.detail = p[5];
-        break;
-    case DTHC_MSG_HELLO_INFO: {
-        dthc_hello_info_t *h = &m->u.hello_info;
-        h->proto_major = p[0];
-        h->proto_minor = p[1];
-        h->fw_major = p[2];
-        h->fw_minor = p[3];
-        h->fw_patch = p[4];
-        h->reset_reason = p[5];
-        h->boot_id = dthc_get_u32(p + 6);
-        for (i = 0; i < DTHC_SERIAL_LEN && p[10 + i] != 0; i++) {
-            h->serial[i] = (char)p[10 + i];
-        }
-        h->serial[i] = '\0';
-        h->sample_rate_hz = dthc_get_u16(p + 26);
-        h->batch_size = p[28];
-        h->capabilities = dthc_get_u32(p + 29);
-        h->z_min_um = dthc_get_i32(p + 33);
-        h->z_max_um = dthc_get_i32(p + 37);
-        h->max_frame = dthc_get_u16(p + 41);
-        h->lease_ms = dthc_get_u16(p + 43);
-        break;
-    }
-    case DTHC_MSG_SAMPLES: {
-        dthc_samples_t *sm = &m->u.samples;
-        sm->stream_seq = dthc_get_u16(p);
-        sm->t0_us = dthc_get_u32(p + 2);
-        sm->period_us = dthc_get_u16(p + 6);
-        sm->z_um = dthc_get_i32(p + 8);
-        sm->inputs = dthc_get_u16(p + 12);
-        sm->zvel_seq = dthc_get_u16(p + 14);
-        sm->xy_speed_dmm_s = dthc_get_u16(p + 16);
-        sm->status = p[18];
-        sm->n_samples = (uint8_t)((payload - DTHC_SAMPLES_HEADER_SIZE) / 2);
-        for (i = 0; i < sm->n_samples; i++) {
-            sm->samples_cv[i] = dthc_get_u16(p + DTHC_SAMPLES_HEADER_SIZE + 2 * i);
-        }
-        break;
-    }
-    case DTHC_MSG_EVENT: {
-        dthc_event_t *e = &m->u.event;
-        e->counter = dthc_get_u32(p);
-        e->t_us = dthc_get_u32(p + 4);
-        e->input = p[8];
-        e->level = p[9];
-        e->inputs = dthc_get_u16(p + 10);
-        e->z_um = dthc_get_i32(p + 12);
-        break;
-    }
-    case DTHC_MSG_FAULT: {
-        dthc_fault_t *f = &m->u.fault;
-        f->counter = dthc_get_u32(p);
-        f->t_us = dthc_get_u32(p + 4);
-        f->code = p[8];
-        f->detail = p[9];
-        f->faults = dthc_get_u16(p + 10);
-        f->z_um = dthc_get_i32(p + 12);
-        break;
-    }
-    case DTHC_MSG_MOTION_DONE:
-        m->u.motion_done.result = p[0];
-        m->u.motion_done.z_um = dthc_get_i32(p + 1);
-        m->u.motion_done.t_us = dthc_get_u32(p + 5);
-        break;
-    case DTHC_MSG_PROBE_RESULT: {
-        dthc_probe_result_t *r = &m->u.probe_result;
-        r->result = p[0];
-        r->sensor = dthc_get_u16(p + 1);
-        r->contact_z_um = dthc_get_i32(p + 3);
-        r->stop_z_um = dthc_get_i32(p + 7);
-        r->t_us = dthc_get_u32(p + 11);
-        break;
-    }
-    case DTHC_MSG_STATUS: {
-        dthc_status_t *st = &m->u.status;
-        st->boot_id = dthc_get_u32(p);
-        st->t_us = dthc_get_u32(p + 4);
-        st->faults = dthc_get_u16(p + 8);
-        st->inputs = dthc_get_u16(p + 10);
-        st->status = p[12];
-        st->lease_ms = dthc_get_u16(p + 13);
-        st->event_counter = dthc_get_u32(p + 15);
-        st->sample_seq = dthc_get_u16(p + 19);
-        st->zvel_seq = dthc_get_u16(p + 21);
-        st->z_um = dthc_get_i32(p + 23);
-        st->current_da = dthc_get_u16(p + 27);
-        st->rx_crc_errors = dthc_get_u16(p + 29);
-        st->rx_framing_errors = dthc_get_u16(p + 31);
-        st->rx_duplicates = dthc_get_u16(p + 33);
-        break;
-    }
-    case DTHC_MSG_CLOCK:
-        m->u.clock.t_us = dthc_get_u64(p);
-        break;
-    default:
-        return DTHC_ERR_UNKNOWN_TYPE; /* unreachable: dthc_payload_size() knows the types */
-    }
+    dthc_unpack_payload(m->type, p, payload, m);
     return DTHC_OK;
 }
 

@@ -20,15 +20,17 @@
  *    Receiving: the receiver COBS-decodes in place into rx.buf and hands out a view:
  *        dthc_frame_t f;
  *        int rc = dthc_rx_feed(&rx, byte, &f);
- *        if (rc == 1) handle(f.type, f.seq, f.payload, f.len);  read fields with dthc_get_*
+ *        if (rc == 1) handle(f.type, f.seq, f.payload, f.len);
  *        else if (rc == DTHC_ERR_UNKNOWN_TYPE || rc == DTHC_ERR_BAD_LENGTH) nak(f.seq, ...);
+ *    handle() reads the fields in place with the generated dthc_<message>_get_<field>
+ *    (dthc_messages.h), e.g. dthc_z_move_get_target_um(f.payload).
  *    f.payload points into rx.buf: use it before feeding the next byte (feed from the main
  *    loop out of a ring buffer the UART ISR fills, not from the ISR itself).
- *    Sending: build the payload with dthc_put_* straight into the transmit buffer at
+ *    Sending: build the payload with dthc_<message>_put_<field> straight into the buffer at
  *    DTHC_TX_PAYLOAD_OFFSET and encode in place, one pass, CRC computed on the way:
  *        uint8_t *p = tx + DTHC_TX_PAYLOAD_OFFSET;  (tx of DTHC_MAX_WIRE_FRAME bytes)
- *        dthc_put_u32(p, boot_id);
- *        n = dthc_encode_frame(DTHC_MSG_ACK, seq, p, 4, tx, sizeof tx);
+ *        dthc_ack_put_boot_id(p, boot_id);
+ *        n = dthc_encode_frame(DTHC_MSG_ACK, seq, p, DTHC_ACK_SIZE, tx, sizeof tx);
  *
  * 2. Messages (convenient on a host or a big MCU):
  *    Sending:   dthc_msg_t m = {DTHC_MSG_ACK, seq, {0}}; m.u.ack.boot_id = id;
@@ -55,6 +57,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -115,45 +118,8 @@ extern "C" {
 #define DTHC_FAULT_REPEAT_MS 250
 /* SAMPLES.xy_speed_dmm_s when the board does not measure XY speed. */
 #define DTHC_XY_SPEED_UNKNOWN 0xFFFF
-/* HELLO_INFO.serial: ASCII, padded with 0x00 to this many bytes on the wire. */
-#define DTHC_SERIAL_LEN 16
-/* SAMPLES: fixed part of the payload, and the most samples that fit one frame
- * (19 + 2N <= 252). CONFIGURE limits batch_size to DTHC_MAX_BATCH_SIZE; a receiver
- * accepts any N that fits. */
-#define DTHC_SAMPLES_HEADER_SIZE 19
-#define DTHC_MAX_SAMPLES ((DTHC_MAX_PAYLOAD - DTHC_SAMPLES_HEADER_SIZE) / 2)
 
 /* --- code tables (PROTOCOL.md sections 6 and 7) ---------------------------------------- */
-
-/* First byte of every decoded frame. Host to board below 0x80, board to host above. */
-typedef enum {
-    DTHC_MSG_HELLO = 0x01,
-    DTHC_MSG_HEARTBEAT = 0x02,
-    DTHC_MSG_SET_LEASE = 0x03,
-    DTHC_MSG_TORCH = 0x04,
-    DTHC_MSG_OHMIC_SENSE = 0x05,
-    DTHC_MSG_Z_MOVE = 0x06,
-    DTHC_MSG_Z_PROBE = 0x07,
-    DTHC_MSG_Z_VELOCITY = 0x08,
-    DTHC_MSG_Z_STOP = 0x09,
-    DTHC_MSG_SET_CURRENT = 0x0A,
-    DTHC_MSG_CONFIGURE = 0x0B,
-    DTHC_MSG_QUERY = 0x0C,
-    DTHC_MSG_CLOCK_QUERY = 0x0D,
-    DTHC_MSG_FAULT_RESET = 0x0E,
-    DTHC_MSG_Z_PROBE_AWAY = 0x0F, /* since 1.2; payload as Z_PROBE (u.z_probe) */
-
-    DTHC_MSG_ACK = 0x80,
-    DTHC_MSG_NAK = 0x81,
-    DTHC_MSG_HELLO_INFO = 0x82,
-    DTHC_MSG_SAMPLES = 0x83,
-    DTHC_MSG_EVENT = 0x84,
-    DTHC_MSG_FAULT = 0x85,
-    DTHC_MSG_MOTION_DONE = 0x86,
-    DTHC_MSG_PROBE_RESULT = 0x87,
-    DTHC_MSG_STATUS = 0x88,
-    DTHC_MSG_CLOCK = 0x89
-} dthc_msg_type_t;
 
 /* Bit positions (indices) in the 16-bit input snapshot; bit = 1 when active.
  * EVENT.input carries such an index; masks are (1u << DTHC_INPUT_x). */
@@ -265,145 +231,6 @@ typedef enum {
     DTHC_ERR_TOO_LONG = -6      /* longer than the maximum frame, or the output buffer */
 } dthc_err_t;
 
-/* --- messages ---------------------------------------------------------------------------
- * One struct per message type with the payload fields of firmware_protocol/messages.py in
- * wire order. The header's `seq` lives in dthc_msg_t. Messages without payload have a
- * placeholder member (ISO C has no empty structs); it is neither sent nor read. */
-
-typedef struct { uint8_t proto_major; uint8_t proto_minor; uint32_t host_nonce; } dthc_hello_t;
-typedef struct { uint8_t unused_; } dthc_heartbeat_t;
-typedef struct { uint16_t lease_ms; } dthc_set_lease_t;
-typedef struct { bool on; } dthc_torch_t;
-typedef struct { bool on; } dthc_ohmic_sense_t;
-typedef struct { int32_t target_um; uint32_t feed_um_s; } dthc_z_move_t;
-typedef struct {
-    uint32_t feed_um_s;
-    uint32_t max_travel_um;
-    uint16_t sensors; /* input bit mask */
-} dthc_z_probe_t; /* Z_PROBE and Z_PROBE_AWAY */
-typedef struct { uint16_t stream_seq; int32_t velocity_um_s; uint16_t expiry_ms; } dthc_z_velocity_t;
-typedef struct { uint8_t unused_; } dthc_z_stop_t;
-typedef struct { uint16_t current_da; } dthc_set_current_t;
-typedef struct {
-    uint16_t sample_rate_hz;
-    uint8_t batch_size;
-    uint8_t filter_kind;
-    uint16_t filter_param;
-    uint16_t arc_lost_ms;
-    int32_t cal_offset;
-    float cal_scale; /* IEEE-754 binary32, volts per raw count */
-} dthc_configure_t;
-typedef struct { uint8_t what; } dthc_query_t;
-typedef struct { uint8_t unused_; } dthc_clock_query_t;
-typedef struct { uint16_t mask; } dthc_fault_reset_t;
-
-typedef struct { uint32_t boot_id; } dthc_ack_t;
-typedef struct { uint32_t boot_id; uint8_t code; uint8_t detail; } dthc_nak_t;
-typedef struct {
-    uint8_t proto_major;
-    uint8_t proto_minor;
-    uint8_t fw_major;
-    uint8_t fw_minor;
-    uint8_t fw_patch;
-    uint8_t reset_reason;
-    uint32_t boot_id;
-    /* NUL-terminated. Decoding stops at the first 0x00 on the wire; encoding sends the
-     * bytes before the first NUL, at most DTHC_SERIAL_LEN, padded with 0x00. */
-    char serial[DTHC_SERIAL_LEN + 1];
-    uint16_t sample_rate_hz;
-    uint8_t batch_size;
-    uint32_t capabilities;
-    int32_t z_min_um;
-    int32_t z_max_um;
-    uint16_t max_frame;
-    uint16_t lease_ms;
-} dthc_hello_info_t;
-typedef struct {
-    uint16_t stream_seq;
-    uint32_t t0_us;
-    uint16_t period_us;
-    int32_t z_um;
-    uint16_t inputs;
-    uint16_t zvel_seq;
-    uint16_t xy_speed_dmm_s;
-    uint8_t status;
-    uint8_t n_samples; /* 0..DTHC_MAX_SAMPLES; the payload is 19 + 2 * n_samples bytes */
-    uint16_t samples_cv[DTHC_MAX_SAMPLES];
-} dthc_samples_t;
-typedef struct {
-    uint32_t counter;
-    uint32_t t_us;
-    uint8_t input;
-    uint8_t level;
-    uint16_t inputs;
-    int32_t z_um;
-} dthc_event_t;
-typedef struct {
-    uint32_t counter;
-    uint32_t t_us;
-    uint8_t code;
-    uint8_t detail;
-    uint16_t faults;
-    int32_t z_um;
-} dthc_fault_t;
-typedef struct { uint8_t result; int32_t z_um; uint32_t t_us; } dthc_motion_done_t;
-typedef struct {
-    uint8_t result;
-    uint16_t sensor;
-    int32_t contact_z_um;
-    int32_t stop_z_um;
-    uint32_t t_us;
-} dthc_probe_result_t;
-typedef struct {
-    uint32_t boot_id;
-    uint32_t t_us;
-    uint16_t faults;
-    uint16_t inputs;
-    uint8_t status;
-    uint16_t lease_ms;
-    uint32_t event_counter;
-    uint16_t sample_seq;
-    uint16_t zvel_seq;
-    int32_t z_um;
-    uint16_t current_da;
-    uint16_t rx_crc_errors;
-    uint16_t rx_framing_errors;
-    uint16_t rx_duplicates;
-} dthc_status_t;
-typedef struct { uint64_t t_us; } dthc_clock_t;
-
-/* A message: header plus the payload selected by `type` (a dthc_msg_type_t). */
-typedef struct {
-    uint8_t type;
-    uint8_t seq;
-    union {
-        dthc_hello_t hello;
-        dthc_heartbeat_t heartbeat;
-        dthc_set_lease_t set_lease;
-        dthc_torch_t torch;
-        dthc_ohmic_sense_t ohmic_sense;
-        dthc_z_move_t z_move;
-        dthc_z_probe_t z_probe;
-        dthc_z_velocity_t z_velocity;
-        dthc_z_stop_t z_stop;
-        dthc_set_current_t set_current;
-        dthc_configure_t configure;
-        dthc_query_t query;
-        dthc_clock_query_t clock_query;
-        dthc_fault_reset_t fault_reset;
-        dthc_ack_t ack;
-        dthc_nak_t nak;
-        dthc_hello_info_t hello_info;
-        dthc_samples_t samples;
-        dthc_event_t event;
-        dthc_fault_t fault;
-        dthc_motion_done_t motion_done;
-        dthc_probe_result_t probe_result;
-        dthc_status_t status;
-        dthc_clock_t clock;
-    } u;
-} dthc_msg_t;
-
 /* --- little-endian field helpers --------------------------------------------------------
  * Read and write payload fields in place (PROTOCOL.md section 1: little-endian), with byte
  * shifts, so they work on any host byte order and any alignment. */
@@ -458,6 +285,28 @@ static inline uint64_t dthc_get_u64(const uint8_t *p)
 {
     return (uint64_t)dthc_get_u32(p) | ((uint64_t)dthc_get_u32(p + 4) << 32);
 }
+
+/* f32 fields move as the 4 bytes of an IEEE-754 binary32 `float` (no float arithmetic). */
+static inline void dthc_put_f32(uint8_t *p, float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    dthc_put_u32(p, bits);
+}
+
+static inline float dthc_get_f32(const uint8_t *p)
+{
+    uint32_t bits = dthc_get_u32(p);
+    float v;
+    memcpy(&v, &bits, sizeof v);
+    return v;
+}
+
+/* --- messages ---------------------------------------------------------------------------
+ * Generated from firmware_protocol/declaration.py: the message type codes, one struct per
+ * message type (dthc_msg_t), payload sizes, and field accessors for frame views
+ * (dthc_status_put_z_um(p, v), dthc_z_move_get_target_um(p), ...). */
+#include "dthc_messages.h"
 
 /* --- functions -------------------------------------------------------------------------- */
 

@@ -43,7 +43,8 @@
  *   U <hex>   "CRC <4 hex digits>" by dthc_crc16_update, byte by byte from DTHC_CRC_INIT.
  * Empty lines and lines starting with '#' are ignored; anything else prints "ERR SYNTAX".
  *
- * Fields are printed in the order of firmware_protocol/messages.py: integers in decimal,
+ * Fields are printed in the order of firmware_protocol/declaration.py (dthc_messages.h's
+ * DTHC_FOR_EACH_FIELD, the order of firmware_protocol/messages.py): integers in decimal,
  * bool as 0/1, samples_cv comma-separated (empty when there are none), cal_scale with
  * %.9g (enough to restore the binary32 exactly), serial as its characters with '\\' and
  * bytes outside 0x21..0x7E written as \xNN.
@@ -62,31 +63,10 @@ static uint8_t g_line[LINE_MAX_BYTES];
 static const char *msg_name(uint8_t type)
 {
     switch (type) {
-    case DTHC_MSG_HELLO: return "Hello";
-    case DTHC_MSG_HEARTBEAT: return "Heartbeat";
-    case DTHC_MSG_SET_LEASE: return "SetLease";
-    case DTHC_MSG_TORCH: return "Torch";
-    case DTHC_MSG_OHMIC_SENSE: return "OhmicSense";
-    case DTHC_MSG_Z_MOVE: return "ZMove";
-    case DTHC_MSG_Z_PROBE: return "ZProbe";
-    case DTHC_MSG_Z_PROBE_AWAY: return "ZProbeAway";
-    case DTHC_MSG_Z_VELOCITY: return "ZVelocity";
-    case DTHC_MSG_Z_STOP: return "ZStop";
-    case DTHC_MSG_SET_CURRENT: return "SetCurrent";
-    case DTHC_MSG_CONFIGURE: return "Configure";
-    case DTHC_MSG_QUERY: return "Query";
-    case DTHC_MSG_CLOCK_QUERY: return "ClockQuery";
-    case DTHC_MSG_FAULT_RESET: return "FaultReset";
-    case DTHC_MSG_ACK: return "Ack";
-    case DTHC_MSG_NAK: return "Nak";
-    case DTHC_MSG_HELLO_INFO: return "HelloInfo";
-    case DTHC_MSG_SAMPLES: return "Samples";
-    case DTHC_MSG_EVENT: return "Event";
-    case DTHC_MSG_FAULT: return "Fault";
-    case DTHC_MSG_MOTION_DONE: return "MotionDone";
-    case DTHC_MSG_PROBE_RESULT: return "ProbeResult";
-    case DTHC_MSG_STATUS: return "Status";
-    case DTHC_MSG_CLOCK: return "Clock";
+#define NAME_CASE(NAME, member, Class) \
+    case DTHC_MSG_##NAME: return #Class;
+        DTHC_FOR_EACH_MESSAGE(NAME_CASE)
+#undef NAME_CASE
     default: return "?";
     }
 }
@@ -115,165 +95,46 @@ static void print_hex(const uint8_t *p, size_t n)
 static void pu(const char *key, uint32_t v) { printf(" %s=%" PRIu32, key, v); }
 static void pi(const char *key, int32_t v) { printf(" %s=%" PRId32, key, v); }
 
-static void print_fields(const dthc_msg_t *m)
+static void print_serial(const char *key, const char *serial)
 {
     size_t i;
+    printf(" %s=", key);
+    for (i = 0; i < DTHC_SERIAL_LEN && serial[i] != '\0'; i++) {
+        unsigned c = (unsigned char)serial[i];
+        if (c < 0x21 || c > 0x7E || c == '\\') {
+            printf("\\x%02x", c);
+        } else {
+            putchar((int)c);
+        }
+    }
+}
+
+static void print_samples(const char *key, const uint16_t *samples, uint8_t n)
+{
+    uint8_t i;
+    printf(" %s=", key);
+    for (i = 0; i < n; i++) {
+        printf(i ? ",%u" : "%u", (unsigned)samples[i]);
+    }
+}
+
+/* One field of m->u.member by its kind (dthc_messages.h, DTHC_FOR_EACH_FIELD). */
+#define PRINT_u(member, field) pu(#field, m->u.member.field)
+#define PRINT_i(member, field) pi(#field, m->u.member.field)
+#define PRINT_q(member, field) printf(" " #field "=%" PRIu64, m->u.member.field)
+#define PRINT_f(member, field) printf(" " #field "=%.9g", (double)m->u.member.field)
+#define PRINT_s(member, field) print_serial(#field, m->u.member.field)
+#define PRINT_a(member, field) print_samples(#field, m->u.member.field, m->u.member.n_samples)
+#define PRINT_FIELD(NAME, member, field, kind) \
+    if (m->type == DTHC_MSG_##NAME) {          \
+        PRINT_##kind(member, field);           \
+    }
+
+/* Every field in the order of the declaration (the order of firmware_protocol/messages.py). */
+static void print_fields(const dthc_msg_t *m)
+{
     printf("%s seq=%u", msg_name(m->type), (unsigned)m->seq);
-    switch (m->type) {
-    case DTHC_MSG_HELLO:
-        pu("proto_major", m->u.hello.proto_major);
-        pu("proto_minor", m->u.hello.proto_minor);
-        pu("host_nonce", m->u.hello.host_nonce);
-        break;
-    case DTHC_MSG_HEARTBEAT:
-    case DTHC_MSG_Z_STOP:
-    case DTHC_MSG_CLOCK_QUERY:
-        break;
-    case DTHC_MSG_SET_LEASE:
-        pu("lease_ms", m->u.set_lease.lease_ms);
-        break;
-    case DTHC_MSG_TORCH:
-        pu("on", m->u.torch.on ? 1u : 0u);
-        break;
-    case DTHC_MSG_OHMIC_SENSE:
-        pu("on", m->u.ohmic_sense.on ? 1u : 0u);
-        break;
-    case DTHC_MSG_Z_MOVE:
-        pi("target_um", m->u.z_move.target_um);
-        pu("feed_um_s", m->u.z_move.feed_um_s);
-        break;
-    case DTHC_MSG_Z_PROBE:
-    case DTHC_MSG_Z_PROBE_AWAY:
-        pu("feed_um_s", m->u.z_probe.feed_um_s);
-        pu("max_travel_um", m->u.z_probe.max_travel_um);
-        pu("sensors", m->u.z_probe.sensors);
-        break;
-    case DTHC_MSG_Z_VELOCITY:
-        pu("stream_seq", m->u.z_velocity.stream_seq);
-        pi("velocity_um_s", m->u.z_velocity.velocity_um_s);
-        pu("expiry_ms", m->u.z_velocity.expiry_ms);
-        break;
-    case DTHC_MSG_SET_CURRENT:
-        pu("current_da", m->u.set_current.current_da);
-        break;
-    case DTHC_MSG_CONFIGURE:
-        pu("sample_rate_hz", m->u.configure.sample_rate_hz);
-        pu("batch_size", m->u.configure.batch_size);
-        pu("filter_kind", m->u.configure.filter_kind);
-        pu("filter_param", m->u.configure.filter_param);
-        pu("arc_lost_ms", m->u.configure.arc_lost_ms);
-        pi("cal_offset", m->u.configure.cal_offset);
-        printf(" cal_scale=%.9g", (double)m->u.configure.cal_scale);
-        break;
-    case DTHC_MSG_QUERY:
-        pu("what", m->u.query.what);
-        break;
-    case DTHC_MSG_FAULT_RESET:
-        pu("mask", m->u.fault_reset.mask);
-        break;
-    case DTHC_MSG_ACK:
-        pu("boot_id", m->u.ack.boot_id);
-        break;
-    case DTHC_MSG_NAK:
-        pu("boot_id", m->u.nak.boot_id);
-        pu("code", m->u.nak.code);
-        pu("detail", m->u.nak.detail);
-        break;
-    case DTHC_MSG_HELLO_INFO: {
-        const dthc_hello_info_t *h = &m->u.hello_info;
-        pu("proto_major", h->proto_major);
-        pu("proto_minor", h->proto_minor);
-        pu("fw_major", h->fw_major);
-        pu("fw_minor", h->fw_minor);
-        pu("fw_patch", h->fw_patch);
-        pu("reset_reason", h->reset_reason);
-        pu("boot_id", h->boot_id);
-        printf(" serial=");
-        for (i = 0; i < DTHC_SERIAL_LEN && h->serial[i] != '\0'; i++) {
-            unsigned c = (unsigned char)h->serial[i];
-            if (c < 0x21 || c > 0x7E || c == '\\') {
-                printf("\\x%02x", c);
-            } else {
-                putchar((int)c);
-            }
-        }
-        pu("sample_rate_hz", h->sample_rate_hz);
-        pu("batch_size", h->batch_size);
-        pu("capabilities", h->capabilities);
-        pi("z_min_um", h->z_min_um);
-        pi("z_max_um", h->z_max_um);
-        pu("max_frame", h->max_frame);
-        pu("lease_ms", h->lease_ms);
-        break;
-    }
-    case DTHC_MSG_SAMPLES: {
-        const dthc_samples_t *s = &m->u.samples;
-        pu("stream_seq", s->stream_seq);
-        pu("t0_us", s->t0_us);
-        pu("period_us", s->period_us);
-        pi("z_um", s->z_um);
-        pu("inputs", s->inputs);
-        pu("zvel_seq", s->zvel_seq);
-        pu("xy_speed_dmm_s", s->xy_speed_dmm_s);
-        pu("status", s->status);
-        printf(" samples_cv=");
-        for (i = 0; i < s->n_samples; i++) {
-            printf(i ? ",%u" : "%u", (unsigned)s->samples_cv[i]);
-        }
-        break;
-    }
-    case DTHC_MSG_EVENT:
-        pu("counter", m->u.event.counter);
-        pu("t_us", m->u.event.t_us);
-        pu("input", m->u.event.input);
-        pu("level", m->u.event.level);
-        pu("inputs", m->u.event.inputs);
-        pi("z_um", m->u.event.z_um);
-        break;
-    case DTHC_MSG_FAULT:
-        pu("counter", m->u.fault.counter);
-        pu("t_us", m->u.fault.t_us);
-        pu("code", m->u.fault.code);
-        pu("detail", m->u.fault.detail);
-        pu("faults", m->u.fault.faults);
-        pi("z_um", m->u.fault.z_um);
-        break;
-    case DTHC_MSG_MOTION_DONE:
-        pu("result", m->u.motion_done.result);
-        pi("z_um", m->u.motion_done.z_um);
-        pu("t_us", m->u.motion_done.t_us);
-        break;
-    case DTHC_MSG_PROBE_RESULT:
-        pu("result", m->u.probe_result.result);
-        pu("sensor", m->u.probe_result.sensor);
-        pi("contact_z_um", m->u.probe_result.contact_z_um);
-        pi("stop_z_um", m->u.probe_result.stop_z_um);
-        pu("t_us", m->u.probe_result.t_us);
-        break;
-    case DTHC_MSG_STATUS: {
-        const dthc_status_t *s = &m->u.status;
-        pu("boot_id", s->boot_id);
-        pu("t_us", s->t_us);
-        pu("faults", s->faults);
-        pu("inputs", s->inputs);
-        pu("status", s->status);
-        pu("lease_ms", s->lease_ms);
-        pu("event_counter", s->event_counter);
-        pu("sample_seq", s->sample_seq);
-        pu("zvel_seq", s->zvel_seq);
-        pi("z_um", s->z_um);
-        pu("current_da", s->current_da);
-        pu("rx_crc_errors", s->rx_crc_errors);
-        pu("rx_framing_errors", s->rx_framing_errors);
-        pu("rx_duplicates", s->rx_duplicates);
-        break;
-    }
-    case DTHC_MSG_CLOCK:
-        printf(" t_us=%" PRIu64, m->u.clock.t_us);
-        break;
-    default:
-        break;
-    }
+    DTHC_FOR_EACH_FIELD(PRINT_FIELD)
 }
 
 static void print_constants(void)
