@@ -422,14 +422,26 @@ class ControllerService:
             log.debug("z_velocity_dropped", error=str(exc))
 
     async def run(self) -> None:
-        """Execute board actions in order until cancelled."""
-        while True:
-            action = await self._work.get()
-            try:
-                await self._perform(action)
-            except (TimeoutError, LinkError) as exc:
-                self.sequence.on_action_failed(action, str(exc))
-            self.pump()
+        """Execute board actions in order until cancelled; then cancel and await every task
+        the service (and its board client) started: none outlives it."""
+        try:
+            while True:
+                action = await self._work.get()
+                try:
+                    await self._perform(action)
+                except (TimeoutError, LinkError) as exc:
+                    self.sequence.on_action_failed(action, str(exc))
+                self.pump()
+        finally:
+            await self._stop_background()
+
+    async def _stop_background(self) -> None:
+        tasks = {*self._background, *([self._torch_off] if self._torch_off else [])}
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.wait(tasks)
+        await self.client.stop_background()
 
     async def _perform(self, action: act.BoardAction) -> None:
         """One board action as board requests (its completion comes back as an event); a
@@ -457,8 +469,8 @@ class ControllerService:
         elif isinstance(action, act.ResetFaults):
             await client.fault_reset()
 
-    def _spawn(self, work: Any) -> None:
-        task = asyncio.create_task(work, name="board-completion")
+    def _spawn(self, work: Any, name: str = "board-completion") -> None:
+        task = asyncio.create_task(work, name=name)
         self._background.add(task)
         task.add_done_callback(self._background.discard)
 
@@ -529,7 +541,7 @@ class ControllerService:
         elif self._burning:
             content = counters.pending()
             if content is not None:
-                self._loop.run_in_executor(None, counters.write, content)
+                self._spawn(asyncio.to_thread(counters.write, content), "consumables-write")
         self._burning = burning
 
     def _on_handler_error(self, error: Exception) -> None:
