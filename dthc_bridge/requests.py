@@ -87,6 +87,7 @@ Transaction = str | int
 
 
 def check_transaction(value: object) -> Transaction | None:
+    """A request's ``transaction`` as given, or a pydantic error a JavaScript sender can read."""
     if value is None:
         return None
     if isinstance(value, str) and len(value) <= MAX_TRANSACTION_CHARS:
