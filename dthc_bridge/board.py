@@ -42,6 +42,8 @@ class BoardClient:
         self._recent: OrderedDict[tuple[type, int], fp.Message] = OrderedDict()
         self._waiters: dict[tuple[type, int], asyncio.Future[fp.Message]] = {}
         self.last_status: fp.Status | None = None
+        # The status refresh after lost event reports, kept so it is awaited (stop_background).
+        self._refresh: asyncio.Task[None] | None = None
         supervisor.add_report_listener(self._on_report)  # completions to their waiters first
         supervisor.add_samples_listener(self._to_streams)
         supervisor.add_report_listener(self._to_streams)
@@ -96,8 +98,20 @@ class BoardClient:
                     self._recent.popitem(last=False)
 
     def _on_event_gap(self, missed: int) -> None:
-        # A lost edge or fault report: learn the current state instead of guessing.
-        asyncio.get_running_loop().create_task(self._refresh_status(), name="status-after-gap")
+        # A lost edge or fault report: learn the current state instead of guessing. One
+        # refresh at a time: a STATUS asked while another is on its way learns nothing new.
+        if self._refresh is None or self._refresh.done():
+            self._refresh = asyncio.get_running_loop().create_task(
+                self._refresh_status(), name="status-after-gap"
+            )
+
+    async def stop_background(self) -> None:
+        """Cancel and await the client's own background work (a status refresh); the
+        client stays usable. Its owner (the controller service's run) calls it on the way out."""
+        refresh, self._refresh = self._refresh, None
+        if refresh is not None and not refresh.done():
+            refresh.cancel()
+            await asyncio.wait({refresh})
 
     async def _refresh_status(self) -> None:
         try:

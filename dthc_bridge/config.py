@@ -39,12 +39,12 @@ from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, Settings
 
 import firmware_protocol as fp
 
+from .code_map import parse_code_map
 from .controller.commands import ThcMode
 from .controller.sequence import SequenceConfig
 from .controller.thc import ThcConfig
 from .link import LinkTiming
 from .mqtt.settings import MqttSettings
-from .program.plan import parse_code_map
 
 __all__ = [
     "ConfigError",

@@ -29,7 +29,7 @@ from .consumables import ConsumableLog
 from .controller import actions as act
 from .controller.commands import Abort, Command, CommandError, CycleStart, ProbeTest, ThcHold
 from .controller.dialect import Dialect
-from .controller.gcode import parse_host_motion, parse_line, parse_request
+from .controller.gcode import parse_line
 from .controller.plasma import PlasmaController
 from .controller.sequence import CutSequence, State, with_board_limits
 from .controller.words import cutting_feed_mm_min
@@ -51,7 +51,8 @@ from .materials import (
     material_from_dict,
     material_to_dict,
 )
-from .mqtt.port import CommandResult
+from .port import CommandResult
+from .requests import serve_request
 
 __all__ = ["ControllerService", "EventListener", "feed_samples"]
 
@@ -61,7 +62,6 @@ EVENT_QUEUE_SIZE = 256
 TORCH_OFF_REPEAT_S = 0.1  # board time between direct torch-offs while handlers keep failing
 
 EventListener = Callable[[ControllerEvent], None]
-MATERIAL_REQUESTS = frozenset({"materials", "material_get", "material_set", "material_delete"})
 _ENVELOPE = ("transaction", "deadline_ms")
 INPUT_NAMES = {bit.name.lower(): int(bit) for bit in fp.InputBit}
 HOST_SPEED_STALE_S = 0.45
@@ -124,7 +124,7 @@ class ControllerService:
         """Board time, in seconds: when a command from the sender takes effect."""
         return self.client.board_time_s
 
-    # --- the ControllerPort seam -----------------------------------------------------------
+    # --- the ControllerPort seam (dthc_bridge.port) -------------------------------------
 
     async def execute_gcode(
         self,
@@ -149,38 +149,34 @@ class ControllerService:
         return CommandResult(True, data)
 
     async def execute_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
-        if name == "status":
-            return CommandResult(True, self.snapshot())
-        if name in MATERIAL_REQUESTS:
-            return self._material_request(name, args)
-        if name == "motion":
-            return self._host_motion(args)
-        if name == "consumables_reset":
-            unknown = sorted(set(args) - set(_ENVELOPE))
-            if unknown:
-                return CommandResult(False, error=f"{name} {unknown[0]}: unknown argument")
-            await asyncio.to_thread(self.consumables.reset)
-            return CommandResult(True, {"consumables": self.consumables.counters.as_dict()})
-        if name == "program_start":
-            if self.sequence.busy:
-                return CommandResult(False, error=f"program_start: a cut is running "
-                                     f"({self.sequence.state})")  # fmt: skip
-            # The sender learns the shop's set-up here: the dialect to assume when a program
-            # says nothing dialect-specific, and the code table it rewrites lines with.
-            started = self.controller.begin_program()
-            return CommandResult(
-                True, {**started, "dialect": str(self.dialect), "codes": dict(self.codes)}
-            )
-        if name == "program_end":
-            if self.sequence.busy:
-                return CommandResult(False, error=f"program_end: a cut is running "
-                                     f"({self.sequence.state})")  # fmt: skip
-            return CommandResult(True, self.controller.end_program())
-        try:
-            command = parse_request(name, args)
-        except CommandError as exc:
-            return CommandResult(False, error=str(exc))
+        """A named request, served by its entry in the request table (:mod:`.requests`)."""
+        return await serve_request(self, name, args)
+
+    # --- the request handlers (requests.RequestHandlers) --------------------------------------
+
+    async def execute_command(self, command: Command) -> CommandResult:
         return await self._execute(command, None)
+
+    async def reset_consumables(self) -> CommandResult:
+        await asyncio.to_thread(self.consumables.reset)
+        return CommandResult(True, {"consumables": self.consumables.counters.as_dict()})
+
+    def start_program(self) -> CommandResult:
+        if self.sequence.busy:
+            return CommandResult(False, error=f"program_start: a cut is running "
+                                 f"({self.sequence.state})")  # fmt: skip
+        # The sender learns the shop's set-up here: the dialect to assume when a program
+        # says nothing dialect-specific, and the code table it rewrites lines with.
+        started = self.controller.begin_program()
+        return CommandResult(
+            True, {**started, "dialect": str(self.dialect), "codes": dict(self.codes)}
+        )
+
+    def end_program(self) -> CommandResult:
+        if self.sequence.busy:
+            return CommandResult(False, error=f"program_end: a cut is running "
+                                 f"({self.sequence.state})")  # fmt: skip
+        return CommandResult(True, self.controller.end_program())
 
     async def sender_lost(self, reason: str) -> None:
         if self.sequence.busy:
@@ -200,20 +196,20 @@ class ControllerService:
             ],
         }
 
-    def _host_motion(self, args: Mapping[str, object]) -> CommandResult:
+    def host_motion(
+        self, speed_mm_s: float, feed_mm_min: float | None, state: str | None
+    ) -> CommandResult:
         """``motion`` {xy_speed_mm_s, feed_mm_min?, state?}: the XY speed the sender measured
         from its motion controller's status reports (grbl's position, polled). Used for the
         anti-dive only when the board reports no XY speed; stale after HOST_SPEED_STALE_S."""
-        try:
-            speed, feed, state = parse_host_motion(args)
-        except CommandError as exc:
-            return CommandResult(False, error=str(exc))
         used = not self._board_has_xy
         if used:
-            self._host_speed = (speed, self.now)
-            if feed is not None:
-                self._requested_feed_mm_s = feed / 60.0
-        log.debug("host_motion", speed_mm_s=speed, feed_mm_min=feed, state=state, used=used)
+            self._host_speed = (speed_mm_s, self.now)
+            if feed_mm_min is not None:
+                self._requested_feed_mm_s = feed_mm_min / 60.0
+        log.debug(
+            "host_motion", speed_mm_s=speed_mm_s, feed_mm_min=feed_mm_min, state=state, used=used
+        )
         return CommandResult(True, {"used": used})
 
     def _host_speed_now(self, t_s: float) -> float | None:
@@ -223,7 +219,7 @@ class ControllerService:
         # Negative age: the board rebooted and its clock started again; not fresh.
         return speed if 0.0 <= t_s - at_s <= HOST_SPEED_STALE_S else None
 
-    def _material_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
+    def material_request(self, name: str, args: Mapping[str, object]) -> CommandResult:
         """``materials``, ``material_get``/``_set``/``_delete`` {number, ...}: the library,
         written to its file (crash-safe) before the answer."""
         if name == "materials":
@@ -426,14 +422,26 @@ class ControllerService:
             log.debug("z_velocity_dropped", error=str(exc))
 
     async def run(self) -> None:
-        """Execute board actions in order until cancelled."""
-        while True:
-            action = await self._work.get()
-            try:
-                await self._perform(action)
-            except (TimeoutError, LinkError) as exc:
-                self.sequence.on_action_failed(action, str(exc))
-            self.pump()
+        """Execute board actions in order until cancelled; then cancel and await every task
+        the service (and its board client) started: none outlives it."""
+        try:
+            while True:
+                action = await self._work.get()
+                try:
+                    await self._perform(action)
+                except (TimeoutError, LinkError) as exc:
+                    self.sequence.on_action_failed(action, str(exc))
+                self.pump()
+        finally:
+            await self._stop_background()
+
+    async def _stop_background(self) -> None:
+        tasks = {*self._background, *([self._torch_off] if self._torch_off else [])}
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.wait(tasks)
+        await self.client.stop_background()
 
     async def _perform(self, action: act.BoardAction) -> None:
         """One board action as board requests (its completion comes back as an event); a
@@ -461,8 +469,8 @@ class ControllerService:
         elif isinstance(action, act.ResetFaults):
             await client.fault_reset()
 
-    def _spawn(self, work: Any) -> None:
-        task = asyncio.create_task(work, name="board-completion")
+    def _spawn(self, work: Any, name: str = "board-completion") -> None:
+        task = asyncio.create_task(work, name=name)
         self._background.add(task)
         task.add_done_callback(self._background.discard)
 
@@ -533,7 +541,7 @@ class ControllerService:
         elif self._burning:
             content = counters.pending()
             if content is not None:
-                self._loop.run_in_executor(None, counters.write, content)
+                self._spawn(asyncio.to_thread(counters.write, content), "consumables-write")
         self._burning = burning
 
     def _on_handler_error(self, error: Exception) -> None:

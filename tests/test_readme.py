@@ -7,7 +7,7 @@ from pathlib import Path
 from pydantic import BaseModel
 
 from dthc_bridge.config import DaemonConfig
-from dthc_bridge.controller.gcode import REQUEST_NAMES
+from dthc_bridge.requests import REQUESTS
 
 README = (Path(__file__).parents[1] / "README.md").read_text()
 
@@ -30,8 +30,8 @@ def test_every_configuration_key_is_in_the_readme() -> None:
 
 
 def test_every_named_request_is_in_the_readme() -> None:
-    """Each request name the parser accepts is listed for sender authors."""
-    missing = [name for name in sorted(REQUEST_NAMES) if f"`{name}`" not in README]
+    """Each request of the daemon's request table is listed for sender authors."""
+    missing = [name for name in sorted(REQUESTS) if f"`{name}`" not in README]
     assert missing == []
 
 

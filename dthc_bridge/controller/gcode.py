@@ -1,11 +1,11 @@
-"""G-code lines and MQTT requests into the typed plasma commands of :mod:`.commands`.
+"""G-code lines into the typed plasma commands of :mod:`.commands`.
 
 The G-code sender sends us single lines. :func:`parse_line` splits one line into the plasma
-commands it carries (in line order) and whatever is left for the motion backend; the
-structured MQTT requests that are not G-code go through :func:`parse_request`. Both are
-pure and stateless, and every problem is a :class:`~.commands.CommandError` naming the
-offending word (``"G200 Q: unknown parameter"``, ``"G100 P6 H: required parameter is
-missing"``).
+commands it carries (in line order) and whatever is left for the motion backend (the
+structured MQTT requests that are not G-code are parsed by the request table,
+:mod:`dthc_bridge.requests`). It is pure and stateless, and every problem is a
+:class:`~.commands.CommandError` naming the offending word (``"G200 Q: unknown parameter"``,
+``"G100 P6 H: required parameter is missing"``).
 
 Dialects understood:
 
@@ -57,49 +57,33 @@ Choices made where the source documents are silent or ambiguous:
 * ``M67``/``M68``: Q must be 0..100; the value is passed through (PlasmaC reads <= 0 as 100 %).
   ``M62``-``M65`` with P0/P1 (digital output, arc-OK ignore) or any output but P2/P3 are
   refused, as is ``M67``/``M68`` with any E but 3.
-* Requests: ``torch_up``/``torch_down`` take an optional ``volts`` step (default 1 V, > 0 and
-  <= :data:`MAX_VOLTAGE_STEP_V`); ``velocity_reduction`` is immediate (``synchronized=False``);
-  the envelope keys ``transaction`` and ``deadline_ms`` are ignored, any other unknown key is
-  an error.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from .commands import (
-    Abort,
     Command,
     CommandError,
     CutParams,
-    CycleStart,
     DefineMaterial,
-    HeightOverride,
-    JogZ,
     LegacyMode,
-    OhmicTest,
-    OperatingMode,
     PlasmaMode,
     ProbeAndStart,
     ProbeSurface,
-    ProbeTest,
     ProgramZMove,
-    Rearm,
     ResumePoint,
     SelectCurrent,
     SelectMaterial,
     SetCutParams,
     SetWorkZ,
     ThcEnable,
-    ThcHold,
-    ThcMode,
     TorchEnable,
     TorchStart,
     TorchStop,
     VelocityReduction,
-    VoltageAdjust,
     VoltageMode,
     check_range,
 )
@@ -108,14 +92,12 @@ from .words import GcodeSyntaxError, Tokens, Word, tokenize
 
 __all__ = [
     "MAX_VOLTAGE_STEP_V",
-    "REQUEST_NAMES",
     "ParsedLine",
     "parse_line",
-    "parse_request",
 ]
 
 MAX_VOLTAGE_STEP_V = 50.0
-"""Largest torch up/down step one request may ask for."""
+"""Largest torch up/down step one request may ask for (``torch_up``/``torch_down``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -631,198 +613,3 @@ def parse_line(
         line_number=n_word if n_word is not None else line_number,
         comment="; ".join(comments) if comments else None,
     )
-
-
-# --------------------------------------------------------------------------- MQTT requests
-
-_ENVELOPE_KEYS = frozenset({"transaction", "deadline_ms"})
-
-
-def _arg_number(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise CommandError(name, f"{value!r} is not a number")
-    result = float(value)
-    if not math.isfinite(result):
-        raise CommandError(name, f"{value!r} is not a finite number")
-    return result
-
-
-def _voltage_step(sign: float) -> Callable[[str, Mapping[str, object]], Command]:
-    def parse(name: str, args: Mapping[str, object]) -> Command:
-        volts = _arg_number(f"{name} volts", args.get("volts", 1.0))
-        if not 0 < volts <= MAX_VOLTAGE_STEP_V:
-            raise CommandError(
-                f"{name} volts", f"{volts:g} is out of range (0..{MAX_VOLTAGE_STEP_V:g}]"
-            )
-        return VoltageAdjust(sign * volts)
-
-    return parse
-
-
-def _cycle_start(_name: str, _args: Mapping[str, object]) -> Command:
-    return CycleStart()
-
-
-def _rearm(_name: str, _args: Mapping[str, object]) -> Command:
-    return Rearm()
-
-
-MAX_HEIGHT_STEP_MM = 1.0
-
-
-def _height_override(name: str, args: Mapping[str, object]) -> Command:
-    if args.get("reset") is True:
-        if "mm" in args:
-            raise CommandError(f"{name} mm", "give a step or reset, not both")
-        return HeightOverride(0.0, reset=True)
-    if "reset" in args:
-        raise CommandError(f"{name} reset", f"{args['reset']!r} is not true")
-    if "mm" not in args:
-        raise CommandError(f"{name} mm", "required argument is missing (or reset: true)")
-    step = _arg_number(f"{name} mm", args["mm"])
-    tenths = round(step * 10.0)
-    if abs(step * 10.0 - tenths) > 1e-6 or tenths == 0:
-        raise CommandError(f"{name} mm", f"{step:g} is not a step of 0.1 mm")
-    if abs(step) > MAX_HEIGHT_STEP_MM:
-        raise CommandError(f"{name} mm", f"{step:g} is more than {MAX_HEIGHT_STEP_MM:g} mm")
-    return HeightOverride(tenths / 10.0)
-
-
-def _abort(_name: str, _args: Mapping[str, object]) -> Command:
-    return Abort()
-
-
-def _thc_hold(name: str, args: Mapping[str, object]) -> Command:
-    on = args.get("on")
-    if not isinstance(on, bool):
-        raise CommandError(f"{name} on", f"{on!r} is not true or false")
-    return ThcHold(on)
-
-
-def _thc_switch(name: str, args: Mapping[str, object]) -> Command:
-    """The operator's THC on/off (a panel's switch): M667 / M666 without a program line."""
-    on = args.get("on")
-    if not isinstance(on, bool):
-        raise CommandError(f"{name} on", f"{on!r} is not true or false")
-    return ThcEnable(on)
-
-
-def _ohmic_test(_name: str, _args: Mapping[str, object]) -> Command:
-    return OhmicTest()
-
-
-def _probe_test(_name: str, _args: Mapping[str, object]) -> Command:
-    return ProbeTest()
-
-
-MAX_JOG_MM = 10.0
-MAX_JOG_FEED_MM_MIN = 3000.0
-
-
-def _jog_z(name: str, args: Mapping[str, object]) -> Command:
-    if "mm" not in args:
-        raise CommandError(f"{name} mm", "required argument is missing")
-    mm = _arg_number(f"{name} mm", args["mm"])
-    if mm == 0 or abs(mm) > MAX_JOG_MM:
-        raise CommandError(f"{name} mm", f"{mm:g} is not a step of 0 < |mm| <= {MAX_JOG_MM:g}")
-    feed = None
-    if "feed_mm_min" in args:
-        feed = check_range(
-            f"{name} feed_mm_min", _arg_number(f"{name} feed_mm_min", args["feed_mm_min"]),
-            1.0, MAX_JOG_FEED_MM_MIN,
-        )  # fmt: skip
-    return JogZ(mm, feed)
-
-
-def _material_select(name: str, args: Mapping[str, object]) -> Command:
-    """The panel's material selector: the next cut's material, as PlasmaC's M190 P<n>."""
-    if "number" not in args:
-        raise CommandError(f"{name} number", "required argument is missing")
-    number = _arg_number(f"{name} number", args["number"])
-    if number != int(number) or number < 0:
-        raise CommandError(f"{name} number", f"{number:g} is not a material number (0, 1, ...)")
-    return SelectMaterial(int(number), word=f"{name} number {int(number)}")
-
-
-def _operating_mode(name: str, args: Mapping[str, object]) -> Command:
-    if "mode" not in args:
-        raise CommandError(f"{name} mode", "required argument is missing")
-    mode = _arg_number(f"{name} mode", args["mode"])
-    if mode not in (0, 1, 2):
-        raise CommandError(f"{name} mode", f"{mode:g} must be 0, 1 or 2")
-    return OperatingMode(ThcMode(int(mode)))
-
-
-def _request_velocity_reduction(name: str, args: Mapping[str, object]) -> Command:
-    if "percent" not in args:
-        raise CommandError(f"{name} percent", "required argument is missing")
-    percent = _arg_number(f"{name} percent", args["percent"])
-    return VelocityReduction(
-        check_range(f"{name} percent", percent, 0.0, 100.0), synchronized=False
-    )
-
-
-_REQUESTS: dict[str, tuple[frozenset[str], Callable[[str, Mapping[str, object]], Command]]] = {
-    "torch_up": (frozenset({"volts"}), _voltage_step(+1.0)),
-    "torch_down": (frozenset({"volts"}), _voltage_step(-1.0)),
-    "cycle_start": (frozenset(), _cycle_start),
-    "rearm": (frozenset(), _rearm),
-    "thc_hold": (frozenset({"on"}), _thc_hold),
-    "thc": (frozenset({"on"}), _thc_switch),
-    "abort": (frozenset(), _abort),
-    "height_override": (frozenset({"mm", "reset"}), _height_override),
-    "ohmic_test": (frozenset(), _ohmic_test),
-    "probe_test": (frozenset(), _probe_test),
-    "jog_z": (frozenset({"mm", "feed_mm_min"}), _jog_z),
-    "material_select": (frozenset({"number"}), _material_select),
-    "operating_mode": (frozenset({"mode"}), _operating_mode),
-    "velocity_reduction": (frozenset({"percent"}), _request_velocity_reduction),
-}
-
-MAX_HOST_SPEED_MM_S = 2000.0  # 120 m/min: faster than any plasma table's rapids
-_MOTION_KEYS = frozenset({"xy_speed_mm_s", "feed_mm_min", "state"})
-
-
-def parse_host_motion(args: Mapping[str, object]) -> tuple[float, float | None, str | None]:
-    """The ``motion`` request: (measured XY speed mm/s, programmed feed mm/min or None, the
-    motion controller's state or None). The error names the argument, as for commands."""
-    for key in args:
-        if key not in _MOTION_KEYS and key not in _ENVELOPE_KEYS:
-            raise CommandError(f"motion {key}", "unknown argument")
-    if "xy_speed_mm_s" not in args:
-        raise CommandError("motion xy_speed_mm_s", "required argument is missing")
-    speed = check_range(
-        "motion xy_speed_mm_s",
-        _arg_number("motion xy_speed_mm_s", args["xy_speed_mm_s"]),
-        0.0,
-        MAX_HOST_SPEED_MM_S,
-    )
-    feed: float | None = None
-    if args.get("feed_mm_min") is not None:
-        feed = _arg_number("motion feed_mm_min", args["feed_mm_min"])
-        if feed <= 0.0:
-            raise CommandError("motion feed_mm_min", f"{feed:g} must be > 0")
-    state = args.get("state")
-    if state is not None and not isinstance(state, str):
-        raise CommandError("motion state", f"{state!r} is not a string")
-    return speed, feed, state
-
-
-REQUEST_NAMES = frozenset(_REQUESTS)
-"""The request names :func:`parse_request` understands."""
-
-
-def parse_request(name: str, args: Mapping[str, object]) -> Command:
-    """The command of one MQTT request (``thc/<id>/request/<name>`` with JSON ``args``).
-
-    Raises :class:`CommandError` for an unknown name, an unknown or missing argument, or a
-    bad value; the error's word is ``"<name> <argument>"``.
-    """
-    entry = _REQUESTS.get(name)
-    if entry is None:
-        raise CommandError(name or "request", "unknown request")
-    allowed, parse = entry
-    for key in args:
-        if key not in allowed and key not in _ENVELOPE_KEYS:
-            raise CommandError(f"{name} {key}", "unknown argument")
-    return parse(name, args)

@@ -75,6 +75,7 @@ class BoardSession:
         self.initial_status: fp.Status | None = None
         self.boot_id: int | None = None
         self._transport: Transport | None = None
+        self._closing: asyncio.Task[None] | None = None  # fail()'s close; close() awaits it
         self._loop = asyncio.get_running_loop()
         self._pending: dict[int, _Pending] = {}
         self._window = asyncio.Semaphore(timing.window)
@@ -111,11 +112,18 @@ class BoardSession:
         if self._transport is None:
             return  # never opened: nothing was lost (the opener's error says why)
         if self._transport.is_open:
-            self._loop.create_task(self._transport.close(), name="transport-close")
+            self._closing = self._loop.create_task(self._transport.close(), name="transport-close")
         (log.info if expected else log.warning)("link_lost", url=self.url, reason=str(error))
 
     async def close(self) -> None:
+        """End the session; the transport is closed when this returns (the supervisor calls
+        it after every session, lost or not, so the close ``fail`` started is awaited here)."""
         self.fail(LinkDown("closed by the host"), expected=True)
+        if self._closing is not None:
+            try:
+                await self._closing
+            except Exception as exc:  # closing the transport is best effort, said once
+                log.warning("transport_close_failed", url=self.url, error=repr(exc))
         if self._transport is not None:
             await self._transport.close()
 

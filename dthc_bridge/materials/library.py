@@ -35,7 +35,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import KW_ONLY, dataclass, fields
 
-from dthc_bridge.controller.commands import CommandError, CutParams
+from dthc_bridge.cut_params import CommandError, CutParams
 
 __all__ = [
     "MATERIAL_KEYS",

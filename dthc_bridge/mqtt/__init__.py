@@ -1,20 +1,17 @@
 """The MQTT gateway: topics, payload validation, request/response, retained state.
 
 Only this package imports aiomqtt. The daemon builds an :class:`MqttGateway` over its
-controller service (a :class:`ControllerPort`) and runs it in its task group.
+controller service (a :class:`dthc_bridge.port.ControllerPort`) and runs it in its task group.
 """
 
 from __future__ import annotations
 
 from .gateway import GatewayStats, MqttGateway
 from .payloads import GcodeRequest, Request, RequestRefused, decode_request, response_payload
-from .port import CommandResult, ControllerPort
 from .settings import MqttSettings, MqttTls
 from .topics import Topics
 
 __all__ = [
-    "CommandResult",
-    "ControllerPort",
     "GatewayStats",
     "GcodeRequest",
     "MqttGateway",

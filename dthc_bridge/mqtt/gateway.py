@@ -29,7 +29,8 @@ from paho.mqtt.properties import Properties
 from paho.mqtt.subscribeoptions import SubscribeOptions
 
 from ..backoff import backoff_delay_s
-from ..controller.dialect import Dialect
+from ..port import CommandResult, ControllerPort
+from ..requests import execute
 from .broker import BrokerRefused, describe_broker_error, is_refusal
 from .cancellation import honour_cancellation
 from .denials import DenialWatch
@@ -45,12 +46,11 @@ from .payloads import (
     peek_transaction,
     response_payload,
 )
-from .port import CommandResult, ControllerPort
 from .settings import MqttSettings
 from .topics import REQUEST_NAME, topic_error
 from .transactions import TransactionCache
 
-__all__ = ["GatewayStats", "MqttGateway", "execute"]
+__all__ = ["GatewayStats", "MqttGateway"]
 
 log = structlog.get_logger("dthc_bridge.mqtt")
 
@@ -643,21 +643,6 @@ class MqttGateway:
             task.cancel()
         if pending:
             await asyncio.wait(pending)
-
-
-async def execute(
-    controller: ControllerPort, name: str, request: GcodeRequest | Request
-) -> CommandResult:
-    """A decoded request, run by the controller (the gateway's, and the simulated program
-    runs' in-process daemon: one mapping from request to controller call)."""
-    if isinstance(request, GcodeRequest):
-        return await controller.execute_gcode(
-            request.line,
-            line_number=request.line_number,
-            xy_mm=request.xy_mm,
-            dialect=None if request.dialect is None else Dialect(request.dialect),
-        )
-    return await controller.execute_request(name, request.args)
 
 
 def _codes(granted: object) -> list[object]:

@@ -1,4 +1,7 @@
-"""Inbound request payloads (pydantic, strict) and the response document (zigbee2mqtt form).
+"""Inbound request payloads decoded and the response document (zigbee2mqtt form).
+
+The payload models (pydantic, strict) are declared with the requests, in
+:mod:`dthc_bridge.requests`; each request name's entry there says which one decodes it.
 
 Decoding never raises anything but :class:`RequestRefused`, whose message names the
 offending field, so the gateway can answer every bad request with one clear error.
@@ -10,20 +13,21 @@ import contextlib
 import json
 import math
 from collections.abc import Mapping
-from typing import Any, Final, Literal, Self
+from typing import Any
 
-from pydantic import (
-    BaseModel,
-    ConfigDict,
-    Field,
-    JsonValue,
-    ValidationError,
-    field_validator,
-    model_validator,
-)
+from pydantic import ValidationError
 from pydantic_core import PydanticCustomError
 
-from .port import CommandResult
+from ..port import CommandResult
+from ..requests import (
+    GCODE_REQUEST,
+    REQUESTS,
+    GcodeRequest,
+    Request,
+    Transaction,
+    check_transaction,
+    describe_validation_error,
+)
 
 __all__ = [
     "GCODE_REQUEST",
@@ -39,15 +43,6 @@ __all__ = [
     "response_payload",
 ]
 
-GCODE_REQUEST: Final = "gcode"
-MAX_LINE_CHARS: Final = 256
-MAX_TRANSACTION_CHARS: Final = 128
-MAX_SAFE_INT: Final = 2**53  # what a JavaScript sender can hold exactly
-MAX_DEADLINE_MS: Final = 3_600_000
-MAX_COORDINATE_MM: Final = 100_000.0
-
-Transaction = str | int
-
 
 class RequestRefused(Exception):
     """A request that is refused before reaching the controller; nothing was changed."""
@@ -56,96 +51,6 @@ class RequestRefused(Exception):
         super().__init__(reason)
         self.reason = reason
         self.transaction = transaction
-
-
-def _check_transaction(value: object) -> Transaction | None:
-    if value is None:
-        return None
-    if isinstance(value, str) and len(value) <= MAX_TRANSACTION_CHARS:
-        return value
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) <= MAX_SAFE_INT:
-        return value
-    raise PydanticCustomError(
-        "transaction",
-        "must be a string of at most {chars} characters or an integer within +/-2^53",
-        {"chars": MAX_TRANSACTION_CHARS},
-    )
-
-
-class _RequestBase(BaseModel):
-    model_config = ConfigDict(strict=True, frozen=True)
-
-    transaction: Transaction | None = None
-    deadline_ms: int | None = Field(default=None, gt=0, le=MAX_DEADLINE_MS)
-
-    @field_validator("transaction", mode="before")
-    @classmethod
-    def _transaction(cls, value: object) -> Transaction | None:
-        return _check_transaction(value)
-
-    @property
-    def deadline_s(self) -> float | None:
-        return None if self.deadline_ms is None else self.deadline_ms / 1000.0
-
-
-class GcodeRequest(_RequestBase):
-    """``request/gcode``: one G-code line, with the sender's line number and XY position."""
-
-    model_config = ConfigDict(strict=True, frozen=True, extra="forbid")
-
-    line: str = Field(min_length=1, max_length=MAX_LINE_CHARS)
-    line_number: int | None = Field(default=None, ge=0, le=2**31 - 1)
-    x: float | None = Field(
-        default=None, ge=-MAX_COORDINATE_MM, le=MAX_COORDINATE_MM, allow_inf_nan=False
-    )
-    y: float | None = Field(
-        default=None, ge=-MAX_COORDINATE_MM, le=MAX_COORDINATE_MM, allow_inf_nan=False
-    )
-    # The program's dialect (dthc_bridge.controller.dialect); absent: the daemon's own.
-    dialect: Literal["masso", "plasmac", "rosetta", "relay"] | None = None
-
-    @field_validator("line")
-    @classmethod
-    def _one_printable_line(cls, value: str) -> str:
-        if any((ord(c) < 0x20 and c != "\t") or ord(c) == 0x7F for c in value):
-            raise PydanticCustomError(
-                "control_character", "must be one line without control characters"
-            )
-        if not value.strip():
-            raise PydanticCustomError("blank", "must not be blank")
-        return value
-
-    @model_validator(mode="after")
-    def _xy_together(self) -> Self:
-        if (self.x is None) != (self.y is None):
-            raise PydanticCustomError("xy_pair", "x and y must be given together")
-        return self
-
-    @property
-    def xy_mm(self) -> tuple[float, float] | None:
-        if self.x is None or self.y is None:
-            return None
-        return (self.x, self.y)
-
-
-class Request(_RequestBase):
-    """``request/<name>``: ``transaction`` and ``deadline_ms``, the rest are the arguments."""
-
-    model_config = ConfigDict(strict=True, frozen=True, extra="allow")
-    __pydantic_extra__: dict[str, JsonValue] = Field(init=False)
-
-    @property
-    def args(self) -> dict[str, JsonValue]:
-        return dict(self.__pydantic_extra__)
-
-
-def describe_validation_error(exc: ValidationError) -> str:
-    """One line naming each offending field: ``line: String should have at most 256 ...``."""
-    parts: list[str] = []
-    for error in exc.errors(include_url=False):
-        where = ".".join(str(part) for part in error["loc"]) or "payload"
-        parts.append(f"{where}: {error['msg']}")
-    return "; ".join(parts)
 
 
 def _refuse_constant(name: str) -> Any:
@@ -190,8 +95,9 @@ def decode_request(name: str, payload: bytes, *, max_payload_bytes: int) -> Gcod
         raise RequestRefused(f"payload must be a JSON object, not {_json_type(document)}")
     transaction: Transaction | None = None
     with contextlib.suppress(PydanticCustomError):  # reported below, naming the field
-        transaction = _check_transaction(document.get("transaction"))
-    model: type[GcodeRequest | Request] = GcodeRequest if name == GCODE_REQUEST else Request
+        transaction = check_transaction(document.get("transaction"))
+    spec = REQUESTS.get(name)
+    model = Request if spec is None else spec.payload
     try:
         return model.model_validate(document)
     except ValidationError as exc:
@@ -206,7 +112,7 @@ def peek_transaction(payload: bytes, *, max_payload_bytes: int) -> Transaction |
         return None
     try:
         document = json.loads(payload)
-        return _check_transaction(document.get("transaction"))
+        return check_transaction(document.get("transaction"))
     except (ValueError, RecursionError, AttributeError, PydanticCustomError):
         return None
 

@@ -4,7 +4,8 @@ MQTT carries no trustworthy identity inside a message, so who may light the torc
 broker's decision: a user per role and an ACL. This table is that ACL's one source: the
 installer writes mosquitto's ``acl_file`` from it (``dthc-bridge install-service
 --broker-config``), ``systemd/mosquitto-acl.example`` is its rendering for the default
-topics, and a test holds every request the daemon serves to a line of :data:`REQUESTS`.
+topics. Who may send which request is declared in the request table
+(:data:`dthc_bridge.requests.REQUESTS`, ``sender_only``); :data:`REQUESTS` here is read from it.
 
 - ``daemon``: reads the requests and the sender's will; alone writes the state topics.
 - ``sender``: the one role that may send requests that light the torch or move Z.
@@ -19,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
+from ..requests import REQUESTS as REQUEST_TABLE
+
 __all__ = ["PANEL_REQUESTS", "REQUESTS", "Grant", "Role", "grants", "render_acl"]
 
 
@@ -30,37 +33,9 @@ class Role(StrEnum):
 
 
 # Every request the daemon serves, and whether it can light the torch or move Z (directly,
-# or by changing what the THC or the sequence does next). Only the sender may send these.
-REQUESTS: dict[str, bool] = {
-    "gcode": True,
-    "cycle_start": True,
-    "rearm": True,
-    "torch_up": True,
-    "torch_down": True,
-    "height_override": True,
-    "thc": True,
-    "thc_hold": True,
-    "ohmic_test": True,  # energises the ohmic circuit on the torch
-    "probe_test": True,
-    "jog_z": True,
-    "operating_mode": True,
-    "velocity_reduction": True,
-    "motion": True,  # the anti-dive speed: a forged 0 or a forged full speed moves Z
-    "program_start": True,
-    "program_end": True,
-    # A stop only ever puts the torch out and raises it to safe height (the fault path):
-    # the panel's Stop must work whoever drives the table, as a stop button on the machine.
-    "abort": False,
-    "status": False,
-    "materials": False,
-    "material_get": False,
-    "material_set": False,  # the next cut's parameters, validated; the sender selects them
-    "material_delete": False,
-    # The panel's material selector: the next cut's parameters from the library, as an M190
-    # in the program would choose them; validated, and a program's own M190 comes after it.
-    "material_select": False,
-    "consumables_reset": False,  # the pierce count and arc-on time start again from zero
-}
+# or by changing what the THC or the sequence does next): only the sender may send these.
+# Declared with each request in the request table (dthc_bridge/requests.py), read here.
+REQUESTS: dict[str, bool] = {name: spec.sender_only for name, spec in REQUEST_TABLE.items()}
 
 PANEL_REQUESTS = frozenset(name for name, moves in REQUESTS.items() if not moves)
 """The daemon's requests the panel may send itself."""

@@ -21,8 +21,8 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
+from ..port import CommandResult
 from .payloads import Transaction
-from .port import CommandResult
 
 __all__ = ["Seen", "TransactionCache"]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..code_map import parse_code_map
 from ..controller.dialect import Dialect
-from .plan import parse_code_map
 
 __all__ = ["add_daemon_options", "add_dialect_options"]
 

@@ -37,6 +37,7 @@ import re
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
+from ..code_map import code_key
 from ..controller.commands import (
     CommandError,
     ProbeSurface,
@@ -62,7 +63,6 @@ __all__ = [
     "Refused",
     "Step",
     "detect_dialect",
-    "parse_code_map",
 ]
 
 CUT_FEED_PIN = "plasmac.cut-feed-rate"
@@ -180,25 +180,6 @@ def unknown_m_codes(steps: Sequence[Step]) -> list[Refused]:
                 f"and the program has no cut: if these switch the torch, map them ({hint})")
         for name, step in zip(names, first.values(), strict=True)
     ]  # fmt: skip
-
-
-def parse_code_map(pairs: Sequence[str]) -> dict[str, str]:
-    """``["H1=M667", "H0=M666"]`` → ``{"H1": "M667", "H0": "M666"}``; errors name the pair."""
-    codes: dict[str, str] = {}
-    for pair in pairs:
-        code, sep, target = (part.strip() for part in pair.partition("="))
-        if not sep or re.fullmatch(r"[A-Za-z]-?\d+(?:\.\d+)?", code) is None or not target:
-            raise ValueError(f"{pair!r}: expected CODE=LINE, for example H1=M667")
-        try:
-            tokenize(target)
-        except GcodeSyntaxError as exc:
-            raise ValueError(f"{pair!r}: {exc}") from None
-        codes[_code_key(code[0], float(code[1:]))] = target
-    return codes
-
-
-def _code_key(letter: str, value: float) -> str:
-    return f"{letter.upper()}{value:g}"
 
 
 _TUBE_MATERIAL = re.compile(r"\(\s*o\s*=\s*0\b[^)]*\)")
@@ -424,7 +405,7 @@ class ProgramPlan:
         words = tokenize(text).words
         out, kept = [], 0
         for word in words:
-            target = self._codes.get(_code_key(word.letter, word.value)) if word.number else None
+            target = self._codes.get(code_key(word.letter, word.value)) if word.number else None
             if target is not None:
                 out += [text[kept : word.start], target]
                 kept = word.end

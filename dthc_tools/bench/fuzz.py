@@ -40,8 +40,9 @@ import aiomqtt
 
 import firmware_protocol as fp
 from dthc_bridge.controller.commands import CommandError
-from dthc_bridge.controller.gcode import REQUEST_NAMES, parse_line, parse_request
+from dthc_bridge.controller.gcode import parse_line
 from dthc_bridge.mqtt.topics import REQUEST_NAME
+from dthc_bridge.requests import GCODE_REQUEST, REQUESTS, parse_request
 
 from ..demo import Stack, StackOptions
 from .mock_control import mock_control
@@ -54,7 +55,11 @@ BOARD_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Samples, fp.Event, fp.Fault,
 KNOWN_TYPES = frozenset(int(t) for t, _ in fp.LAYOUTS.values())
 CHUNK_BYTES = 1800  # per inject op: its hex fits the control port's 4 kB line
 MAX_PAYLOAD = 4096  # the daemon's max_payload_bytes (default)
+# Requests whose valid payloads change nothing of the cut: read-only ones, and the anti-dive
+# speed (the sender's next report replaces it). Every other request of the table is sent
+# only when it is refused (a command whose arguments do not parse) or not at all.
 SAFE_REQUESTS = frozenset({"status", "materials", "material_get", "motion"})
+assert REQUESTS.keys() >= SAFE_REQUESTS
 FRAMES_PER_CUT = 100_000  # a 1 m cut at 3 m/min lasts 20 s; the fuzzer writes ~5,800 frames/s
 
 
@@ -180,8 +185,7 @@ class PayloadFuzzer:
     """Seeded request topics and payloads; ``expected`` maps each well-formed request's
     transaction to its topic (it must get exactly one response)."""
 
-    NAMES = (*sorted(REQUEST_NAMES), "gcode", "status", "materials", "material_get",
-             "material_set", "material_delete", "motion", "program_start")  # fmt: skip
+    NAMES = tuple(sorted(REQUESTS))  # the daemon's request table
 
     def __init__(self, rng: random.Random) -> None:
         self.rng = rng
@@ -297,7 +301,7 @@ class PayloadFuzzer:
         args = {k: v for k, v in document.items() if k != "transaction"}
         if name in SAFE_REQUESTS:
             return True
-        if name == "gcode":
+        if name == GCODE_REQUEST:
             line = args.get("line")
             if not isinstance(line, str):
                 return True
@@ -306,13 +310,15 @@ class PayloadFuzzer:
             except (CommandError, ValueError):
                 return True
             return not parsed.commands  # a motion line: its feed noted, answered at once
-        if name in REQUEST_NAMES:
+        spec = REQUESTS.get(name)
+        if spec is None:
+            return True  # refused: unknown request
+        if spec.command is not None:
             try:
                 parse_request(name, args)
             except CommandError:
                 return True
-            return False
-        return name not in ("program_start", "material_set", "material_delete")
+        return False
 
 
 # --- the run --------------------------------------------------------------------------------

@@ -39,8 +39,8 @@ from dthc_bridge.controller.thc import ThcConfig
 from dthc_bridge.daemon import controller_service
 from dthc_bridge.events import ArcLost, ControllerEvent, ProgramPaused
 from dthc_bridge.link import LinkSupervisor
-from dthc_bridge.mqtt.port import CommandResult
 from dthc_bridge.mqtt.settings import MqttSettings
+from dthc_bridge.port import CommandResult
 from dthc_bridge.transport import BytesCallback, LostCallback, Transport
 from mock_device.sim import SimulatedBoard
 

@@ -10,7 +10,7 @@ The parts are the real ones, in one process on one ``looptime`` loop:
   :class:`~mock_device.sim.SimulatedBoard` (firmware, arc, plate, torch, gantry);
 * between them, the gateway's own request decoding, request-to-controller mapping and
   response encoding (:func:`dthc_bridge.mqtt.payloads.decode_request`,
-  :func:`dthc_bridge.mqtt.gateway.execute`), with its request deadline.
+  :func:`dthc_bridge.requests.execute`), with its request deadline.
 
 What it does not model: the broker (a lost connection, QoS, the sender's will, retained
 state), MQTT's delivery order between an event and a response, the daemon's and the mock's
@@ -29,15 +29,15 @@ from typing import Any
 from dthc_bridge.config import ControllerSettings
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.events import ControllerEvent
-from dthc_bridge.mqtt.gateway import execute
 from dthc_bridge.mqtt.payloads import (
     RequestRefused,
     decode_request,
     encode_json,
     response_payload,
 )
-from dthc_bridge.mqtt.port import CommandResult
 from dthc_bridge.mqtt.settings import MqttSettings
+from dthc_bridge.port import CommandResult
+from dthc_bridge.requests import execute
 from dthc_bridge.service import ControllerService
 from mock_device.plant.gantry import Gantry, GcodeError
 

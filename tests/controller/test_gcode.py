@@ -36,7 +36,8 @@ from dthc_bridge.controller.commands import (
     VoltageAdjust,
     VoltageMode,
 )
-from dthc_bridge.controller.gcode import REQUEST_NAMES, ParsedLine, parse_line, parse_request
+from dthc_bridge.controller.gcode import ParsedLine, parse_line
+from dthc_bridge.requests import COMMAND_REQUESTS, parse_request
 
 SEEDS = Path("/work/shared/seeds")
 MASSO_SEED = SEEDS / "000_4b3df242e51ae6b5.txt"
@@ -718,4 +719,4 @@ def test_request_names_are_published() -> None:
         "thc",
         "abort",
         "height_override",
-    } == REQUEST_NAMES
+    } == COMMAND_REQUESTS

@@ -8,7 +8,7 @@ from collections.abc import AsyncIterator, Mapping
 
 from dthc_bridge.controller.dialect import Dialect
 from dthc_bridge.events import ControllerEvent
-from dthc_bridge.mqtt import CommandResult
+from dthc_bridge.port import CommandResult
 
 __all__ = ["FakeController"]
 

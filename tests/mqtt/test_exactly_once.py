@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from dthc_bridge.mqtt.port import CommandResult
 from dthc_bridge.mqtt.transactions import TransactionCache
+from dthc_bridge.port import CommandResult
 
 from .conftest import Broker
 from .helpers import fast_settings, open_probe, running_gateway

@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dthc_bridge.mqtt import CommandResult, GcodeRequest, Request, RequestRefused, decode_request
+from dthc_bridge.mqtt import GcodeRequest, Request, RequestRefused, decode_request
 from dthc_bridge.mqtt.payloads import encode_json, is_offline_payload, response_payload
+from dthc_bridge.port import CommandResult
 
 LIMIT = 4096
 

@@ -11,8 +11,8 @@ from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from ..controller.dialect import Dialect
-from ..events import ControllerEvent
+from .controller.dialect import Dialect
+from .events import ControllerEvent
 
 __all__ = ["CommandResult", "ControllerPort"]
 
