@@ -40,11 +40,12 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "events": (),
     "config_paths": (),
     "cut_params": (),
+    "units": (),
     "transport": (),
     "link": ("transport", "backoff", "fp"),
     "board": ("link", "fp"),
-    "materials": ("cut_params",),
-    "controller": ("cut_params", "materials", "fp.constants"),
+    "materials": ("cut_params", "units"),
+    "controller": ("cut_params", "units", "materials", "fp.constants"),
     "code_map": ("controller.words",),
     "consumables": ("materials.store",),
     "port": ("events", "controller.dialect"),
@@ -55,7 +56,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     ),
     "mqtt": ("port", "requests", "backoff"),
     "config": ("controller", "link", "mqtt.settings", "code_map", "fp"),
-    "program": ("controller", "materials", "code_map", "config"),
+    "program": ("controller", "units", "materials", "code_map", "config"),
     "logs": ("link.frametrace",),
     "conformance": ("link", "transport", "logs", "fp"),
     "deploy": ("__init__", "mqtt.roles", "mqtt.settings", "mqtt.topics"),
@@ -80,8 +81,12 @@ ONLY_IN = {
 }
 # The wire format is sans-io: none of these, anywhere in firmware_protocol.
 NOT_IN_WIRE_FORMAT = ("asyncio", "serial", "serial_asyncio_fast", "usb", "socket", "selectors")
-# The mock board reads G-code by the daemon's own tokeniser, and nothing else of it.
-MOCK_MAY_IMPORT = ("firmware_protocol", "mock_device", "dthc_bridge.controller.words")
+# The mock board reads G-code by the daemon's own tokeniser and keeps a program's modal
+# state in the same type as every other reader (program/modal.py), and nothing else of it.
+MOCK_MAY_IMPORT = (
+    "firmware_protocol", "mock_device", "dthc_bridge.controller.words",
+    "dthc_bridge.program.modal", "dthc_bridge.units",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from typing import Any
 
 from ..materials import Material, MaterialError, MaterialTable, material_to_dict
 from ..materials import parse_magic_comment as _parse_magic
-from ..materials.library import MM_PER_INCH
+from ..units import MM_PER_INCH
 from .commands import (
     Abort,
     Command,

@@ -36,6 +36,7 @@ from collections.abc import Mapping
 from dataclasses import KW_ONLY, dataclass, fields
 
 from dthc_bridge.cut_params import CommandError, CutParams
+from dthc_bridge.units import MM_PER_INCH
 
 __all__ = [
     "MATERIAL_KEYS",
@@ -49,7 +50,6 @@ __all__ = [
 ]
 
 TEMPORARY_BASE = 1_000_000  # numbers from here up are temporary (program-defined, o=0)
-MM_PER_INCH = 25.4
 
 
 class MaterialError(ValueError):

@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-from ..materials.library import MM_PER_INCH
+from ..units import MM_PER_INCH
 
 __all__ = ["MM_PER_INCH", "ModalState"]
 
