@@ -291,7 +291,7 @@ class PlasmaController:
                 raise CommandError("operating_mode", "cannot change the mode during a cut")
             sequence.mode = command.mode
         elif isinstance(command, VelocityReduction):
-            sequence.velocity_percent = command.percent if command.percent > 0 else 100.0
+            pass  # the sender slows its motion; the THC sees the slower speed as anti-dive
         elif isinstance(command, CycleStart):
             if sequence.state is not State.S1_WAIT:
                 raise CommandError(

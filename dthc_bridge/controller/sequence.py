@@ -121,12 +121,10 @@ class SequenceConfig:
 @dataclass
 class _Cut:
     zero_mm: float  # surface, in carriage Z
-    probed: bool
     start_xy: tuple[float, float] | None
     attempts: int = 0
     arc_ok_since: float | None = None
     arc_lost_since: float | None = None
-    cutting_since: float | None = None
     at_speed_since: float | None = None
     thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
     auto_v: list[float] = field(default_factory=list)
@@ -155,7 +153,6 @@ class CutSequence:
         self.mode = ThcMode.ARC_OK_AND_VOLTAGE
         self.thc_enabled = False  # M667 turns it on
         self.thc_z_feed_mm_min: float | None = None
-        self.velocity_percent = 100.0
         self.voltage_offset_v = 0.0  # torch up / torch down
         # PlasmaC's height override: the cut height raised (+) or lowered, as a change of the
         # target voltage through the THC slope; kept from cut to cut until the program ends.
@@ -327,12 +324,12 @@ class CutSequence:
         if relay or not self.g200_active:
             # The program did its own probe and Z moves: the torch relay, and the THC if the
             # program switches it on. The work Z origin is the cut's datum.
-            self.cut = _Cut(self.work_zero_mm, probed=False, start_xy=xy_mm, relay=True)
+            self.cut = _Cut(self.work_zero_mm, start_xy=xy_mm, relay=True)
             self._torch_on()
             return
         if self._may_skip_probe(xy_mm):
             assert self.last_zero_mm is not None
-            self.cut = _Cut(self.last_zero_mm, probed=False, start_xy=xy_mm)
+            self.cut = _Cut(self.last_zero_mm, start_xy=xy_mm)
             self._to_pierce()
             return
         cfg = self.config
@@ -342,7 +339,7 @@ class CutSequence:
             else cfg.z_min_mm + cfg.probe_height_mm
         )
         start_z = min(start_z, self.safe_z_mm)
-        self.cut = _Cut(math.nan, probed=True, start_xy=xy_mm)
+        self.cut = _Cut(math.nan, start_xy=xy_mm)
         self._enter(State.TO_PROBE_HEIGHT)
         self._move(start_z, cfg.setup_speed_mm_s)
 
@@ -426,7 +423,7 @@ class CutSequence:
         ohmic = self.params.ohmic
         if ohmic:
             self._emit(act.SwitchOhmicSense(True))
-        self._emit(act.ProbeZ(self.params.touch_feed_mm_min / 60.0, travel, ohmic, True))
+        self._emit(act.ProbeZ(self.params.touch_feed_mm_min / 60.0, travel, ohmic))
         return None
 
     def jog_z(self, now: float, mm: float, feed_mm_min: float | None) -> str | None:
@@ -529,7 +526,7 @@ class CutSequence:
         ohmic = self.params.ohmic
         if ohmic:
             self._emit(act.SwitchOhmicSense(True))
-        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, True, away=away))
+        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, away=away))
 
     def set_work_z(self, z_mm: float | None) -> None:
         """G92 Z / G10 L20 Z: the current Z reads ``z_mm``; None (G92.1) clears the origin."""
@@ -716,7 +713,6 @@ class CutSequence:
                     self.params.touch_feed_mm_min / 60.0,
                     max(0.5, z_mm - cfg.z_min_mm),
                     use_ohmic,
-                    True,
                 )
             )
         elif state is State.CREEP_UP:
@@ -1068,7 +1064,6 @@ class CutSequence:
         cut = self.cut
         assert cut is not None
         self._enter(State.CUTTING)
-        cut.cutting_since = self.now
         self.last_cut_start_xy = cut.start_xy
         self.thc.reset()
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
