@@ -119,6 +119,18 @@ class _Cut:
     torch_out: bool = False  # put out by a torch disable (over-cut): stays out until M5
 
 
+@dataclass
+class _ProbeRun:
+    """The last probe (a touch-off, the program's, the operator's test): what its end needs."""
+
+    sensor_ohmic: bool = False  # a touch-off's sensor: creep up until it releases
+    contact_z_mm: float = math.nan  # where the sensor fired
+    requires_contact: bool = True  # the program's G38.2/G38.4 (G38.3/G38.5: no error)
+    away: bool = False  # the program's probe runs up (G38.4/G38.5)
+    return_z_mm: float = math.nan  # a probe test goes back to this Z
+    error: str = ""  # a probe test without contact: the answer once back
+
+
 class CutSequence:
     def __init__(
         self, config: SequenceConfig | None = None, thc: ThcController | None = None
@@ -155,18 +167,13 @@ class CutSequence:
         self._voltages: deque[float] = deque(maxlen=10)
         self._actions: list[act.Action] = []
         self._move_token = 0
-        self._creep_sensor_ohmic = False
-        self._contact_z_mm = math.nan  # where the last probe's sensor fired
+        self._probe = _ProbeRun()
         self._pending_reply: str | None = None
         self.safe_z_mm = self.config.z_max_mm - self.config.top_margin_mm
         self.warnings: list[str] = []
         self.pierce_count = 0
         self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
         self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
-        self._probe_requires_contact = True
-        self._probe_away = False  # the program's probe runs up (G38.4/G38.5)
-        self._test_return_mm = math.nan  # a probe test goes back to this Z
-        self._test_error = ""  # a probe test without contact: the answer once back
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -540,8 +547,8 @@ class CutSequence:
         travel = self._z_mm - self.config.z_min_mm
         if travel <= 0.5:
             raise CommandError("probe_test", "the torch is at the bottom of its travel")
-        self._test_return_mm = self._z_mm
-        self._test_error = ""
+        self._probe.return_z_mm = self._z_mm
+        self._probe.error = ""
         self._pending_reply = "probe_test"
         self._enter(State.PROBE_TEST)
         ohmic = self.params.ohmic
@@ -556,7 +563,7 @@ class CutSequence:
         self.require_idle("jog_z")
         if math.isnan(self._z_mm):
             raise CommandError("jog_z", _Z_UNKNOWN)
-        self._test_error = ""
+        self._probe.error = ""
         self._move_z(now, self._z_mm + mm, self._feed_mm_s(feed_mm_min))
 
     def ohmic_test(self, now: float) -> None:
@@ -653,8 +660,8 @@ class CutSequence:
             self._reply(False, "the touch-off sensors are already released: nothing to probe "
                         "away from (G38.4/G38.5 start in contact)")  # fmt: skip
             return
-        self._probe_requires_contact = command.require_contact
-        self._probe_away = away
+        self._probe.requires_contact = command.require_contact
+        self._probe.away = away
         self._enter(State.PROGRAM_PROBE)
         ohmic = self.params.ohmic
         if ohmic:
@@ -831,8 +838,8 @@ class CutSequence:
         return self.cut.zero_mm + self.params.cut_height_mm
 
     def _answer_z_move(self, reached: bool, z_mm: float) -> None:
-        error = self._test_error or ("" if reached else f"Z stopped at {z_mm:.3f} mm")
-        self._test_error = ""
+        error = self._probe.error or ("" if reached else f"Z stopped at {z_mm:.3f} mm")
+        self._probe.error = ""
         self._reply(not error, error)
 
     def _to_pierce(self) -> None:
@@ -862,13 +869,13 @@ class CutSequence:
         """The touch-off sensor released while creeping up: the surface is known."""
         assert self.cut is not None
         cfg = self.config
-        if self._creep_sensor_ohmic:
+        if self._probe.sensor_ohmic:
             self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
         else:
             # The float switch closes at its travel but opens lower (hysteresis): the zero
             # comes from where it closed, latched by the board on the way down; the creep
             # up only lifts the torch off the plate.
-            self.cut.zero_mm = self._contact_z_mm + cfg.float_travel_mm
+            self.cut.zero_mm = self._probe.contact_z_mm + cfg.float_travel_mm
         self.last_zero_mm = self.cut.zero_mm
         self.probe_required = False
         self._emit(act.SwitchOhmicSense(False))

@@ -167,8 +167,8 @@ class _Probing(StateHandler):
             seq._move(stop_z_mm + cfg.probe_clearance_mm, cfg.setup_speed_mm_s)
             return
         cut.zero_mm = float("nan")
-        seq._creep_sensor_ohmic = ohmic
-        seq._contact_z_mm = contact_z_mm
+        seq._probe.sensor_ohmic = ohmic
+        seq._probe.contact_z_mm = contact_z_mm
         seq._enter(State.CREEP_UP)
         seq._emit(act.SwitchOhmicSense(ohmic))
         seq._move(stop_z_mm + cfg.float_travel_mm + 2.0, cfg.creep_speed_mm_s)
@@ -324,9 +324,9 @@ class _ProgramProbe(StateHandler):
         if seq.params.ohmic:
             seq._emit(act.SwitchOhmicSense(False))
         seq._enter(State.IDLE)
-        if contact or not seq._probe_requires_contact:
+        if contact or not seq._probe.requires_contact:
             seq._reply(True)
-        elif seq._probe_away:
+        elif seq._probe.away:
             seq._reply(False, "the sensors never released while probing away (G38.4)")
         else:
             seq._reply(False, "no contact while probing (plate missing or Z min reached)")
@@ -343,9 +343,9 @@ class _ProbeTest(StateHandler):
             offset = seq.config.ohmic_offset_mm if ohmic else seq.config.float_travel_mm
             seq.last_zero_mm = contact_z_mm + offset
         else:
-            seq._test_error = "no contact while probing (plate missing or Z min reached)"
+            seq._probe.error = "no contact while probing (plate missing or Z min reached)"
         seq._enter(State.Z_MOVE)  # back where it started; answered there
-        seq._move(seq._test_return_mm, seq.config.setup_speed_mm_s)
+        seq._move(seq._probe.return_z_mm, seq.config.setup_speed_mm_s)
 
 
 _IDLE = StateHandler()
