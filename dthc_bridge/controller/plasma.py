@@ -222,7 +222,9 @@ class PlasmaController:
             return Outcome(deferred=True)
         if isinstance(command, ProgramZMove):
             ignored = sequence.program_z_move(now, command)
-            return Outcome(data={"ignored": ignored}) if ignored else Outcome(deferred=True)
+            if ignored is not None:
+                return Outcome(data={"ignored": ignored})
+            return Outcome(deferred=True)
         if isinstance(command, ProbeSurface):
             sequence.probe_surface(now, command)
             return Outcome(deferred=True)

@@ -1,10 +1,6 @@
 """The cut sequence's states, one handler each (STYLE.md 22): what a state does with a
 batch of samples, the passing of time (the arc watch, its timer running out), a finished Z
-move or probe, and an input edge is read in one class.
-
-    IDLE -M3-> TO_PROBE_HEIGHT -> PROBING -> CREEP_UP -> TO_PIERCE -> ARC_WAIT
-      -> PIERCE_DELAY -> [S1: S1_RAISE -> S1_WAIT -(cycle start)-> S1_LOWER -> ARC_WAIT]
-      -> [PUDDLE_JUMP] -> TO_CUT_HEIGHT -> CUTTING -M5-> [PAUSE_AT_END] -> TO_SAFE -> IDLE
+move or probe, and an input edge is read in one class (the state diagram: :mod:`.sequence`).
 
 The handlers hold no state of their own: the cut's data is the sequence's (``CutSequence``),
 and the steps they take (``_torch_on``, ``_fault``, ...) are its methods, shared by the
