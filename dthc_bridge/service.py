@@ -455,15 +455,11 @@ class ControllerService:
             seq = await client.start_move_z(action.target_mm, action.feed_mm_s)
             self._spawn(self._await_move(seq, action.token))
         elif isinstance(action, act.ProbeZ):
-            sensors = (fp.InputMask.OHMIC if action.ohmic else 0) | (
-                fp.InputMask.FLOAT if action.float_switch else 0
-            )
+            sensors = (fp.InputMask.OHMIC if action.ohmic else 0) | fp.InputMask.FLOAT
             seq = await client.start_probe(
                 action.feed_mm_s, action.max_travel_mm, sensors, away=action.away
             )
             self._spawn(self._await_probe(seq, action.away))
-        elif isinstance(action, act.StopZ):
-            await client.z_stop()
         elif isinstance(action, act.ApplyCurrent):
             await client.set_current(action.current_a)
         elif isinstance(action, act.ResetFaults):
@@ -491,7 +487,7 @@ class ControllerService:
         try:
             done = await self.client.wait_report(fp.ProbeResult, seq, self.command_timeout_s)
         except LinkError as exc:
-            self.sequence.on_action_failed(act.ProbeZ(0, 0, False, False, away), str(exc))
+            self.sequence.on_action_failed(act.ProbeZ(0, 0, False, away), str(exc))
         else:
             goal = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
             self.sequence.on_probe_done(

@@ -21,7 +21,6 @@ __all__ = [
     "ProbeZ",
     "ResetFaults",
     "SetZVelocity",
-    "StopZ",
     "SwitchOhmicSense",
     "SwitchTorch",
 ]
@@ -49,12 +48,12 @@ class MoveZ:
 @dataclass(frozen=True, slots=True)
 class ProbeZ:
     """Probe down until a sensor closes; ``away``: up until every one is released (G38.4/
-    G38.5 on Z; a board of protocol 1.2 or later)."""
+    G38.5 on Z; a board of protocol 1.2 or later). The float switch always stops a probe;
+    ``ohmic`` adds ohmic contact."""
 
     feed_mm_s: float
     max_travel_mm: float
     ohmic: bool
-    float_switch: bool
     away: bool = False
 
 
@@ -63,11 +62,6 @@ class SetZVelocity:
     """The THC's output: Z velocity now (streamed, expires on the board)."""
 
     velocity_mm_s: float
-
-
-@dataclass(frozen=True, slots=True)
-class StopZ:
-    pass
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,14 +103,7 @@ class PauseProgram:
 
 
 BoardAction = (
-    SwitchTorch
-    | SwitchOhmicSense
-    | MoveZ
-    | ProbeZ
-    | SetZVelocity
-    | StopZ
-    | ApplyCurrent
-    | ResetFaults
+    SwitchTorch | SwitchOhmicSense | MoveZ | ProbeZ | SetZVelocity | ApplyCurrent | ResetFaults
 )
 Notice = CommandReply | PauseProgram
 Action = BoardAction | Notice

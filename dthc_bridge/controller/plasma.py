@@ -47,7 +47,7 @@ from .commands import (
     VoltageAdjust,
     VoltageMode,
 )
-from .sequence import CutSequence, State
+from .sequence import CutSequence
 
 __all__ = ["TOOL_NOTE", "Outcome", "PlasmaController", "ResumeTrack"]
 
@@ -128,9 +128,7 @@ class PlasmaController:
         selected = table.selected_number if not table.selected.temporary else 0
         library = {n: m for n, m in table.materials.items() if not m.temporary}
         self.materials = MaterialTable(library, self.default_material, initial=selected)
-        self.sequence.torch_enabled = True
-        self.sequence.work_origin_mm = None
-        self.sequence.override_height(0.0)  # the last program's override ends with it
+        self.sequence.begin_program()
         material = self.materials.selected
         return {
             "material": selected,
@@ -156,18 +154,6 @@ class PlasmaController:
         self.sequence.override_height(0.0)
         return {"height_override_mm": 0.0}
 
-    def _override_height(self, command: HeightOverride) -> dict[str, Any]:
-        sequence = self.sequence
-        height = 0.0 if command.reset else round(sequence.height_override_mm + command.step_mm, 1)
-        bound = sequence.params.cut_height_mm / 2.0
-        if abs(height) > bound + 1e-9:
-            raise CommandError(
-                "height_override mm",
-                f"{height:+.1f} mm is beyond half the cut height (±{bound:.2f} mm)",
-            )
-        sequence.override_height(height)
-        return {"height_override_mm": height, "target_v": sequence.thc.target_v}
-
     def _in_inches(self, material: Material) -> bool:
         """Library and program materials are in the machine's units; material 0 is the
         daemon's own default, always mm."""
@@ -177,8 +163,7 @@ class PlasmaController:
         """The cut parameters ``material`` would put in force; refused during a cut or
         when the material is outside the controller's ranges. Changes nothing."""
         sequence = self.sequence
-        if sequence.busy:
-            raise CommandError(word, f"not during a cut ({sequence.state})")
+        sequence.require_idle(word)
         current = sequence.params
         try:
             params = material.as_cut_params(
@@ -199,14 +184,11 @@ class PlasmaController:
         if material.positions_nothing:
             # QtPlasmaC's tube cutting: the program probes and moves Z itself; the torch
             # starts where it put it, after the material's pierce delay.
-            if sequence.busy:
-                raise CommandError(word, f"not during a cut ({sequence.state})")
-            sequence.program_positions(material.pierce_delay_s)
+            sequence.program_positions(material.pierce_delay_s, word)
         else:
             sequence.set_params(params or self._material_params(material, word))
         sequence.set_thc(material.thc)
-        sequence.config = replace(
-            sequence.config,
+        sequence.set_material_timing(
             pause_at_end_s=material.pause_at_end_s,
             # 0 in the file: no puddle jump (100 % of the pierce height, no delay).
             puddle_height_percent=material.puddle_jump_height_percent or 100.0,
@@ -229,51 +211,50 @@ class PlasmaController:
     def handle(
         self, command: Command, now: float, xy_mm: tuple[float, float] | None = None
     ) -> Outcome:
+        """Dispatch ``command`` to the sequence method that owns it and its guard (a refusal
+        raises CommandError and changes nothing)."""
         sequence = self.sequence
         if isinstance(command, TorchStart):
             sequence.start(now, xy_mm, relay=command.relay)
             return Outcome(deferred=True)
-        if isinstance(command, ProgramZMove | ProbeSurface | SetWorkZ):
-            return self._program_z(command, now)
         if isinstance(command, TorchStop):
             sequence.stop(now, xy_mm)
             return Outcome(deferred=True)
+        if isinstance(command, ProgramZMove):
+            ignored = sequence.program_z_move(now, command)
+            if ignored is not None:
+                return Outcome(data={"ignored": ignored})
+            return Outcome(deferred=True)
+        if isinstance(command, ProbeSurface):
+            sequence.probe_surface(now, command)
+            return Outcome(deferred=True)
+        if isinstance(command, SetWorkZ):
+            return Outcome(data={"work_zero_mm": round(sequence.set_work_z(command), 3)})
         if isinstance(command, ProbeAndStart):
-            return self._probe_and_start(command, now, xy_mm)
+            if not self.prepare_probe_and_start(command):
+                return Outcome(data={"mode": command.mode})
+            sequence.start(now, xy_mm)
+            return Outcome(deferred=True)
         if isinstance(command, PlasmaMode):
             if self.plasma_only and not command.enabled:
                 return Outcome(data={"tool": command.tool, "note": TOOL_NOTE})
-            if sequence.busy and not command.enabled:
-                raise CommandError(f"T{command.tool} M6", "cannot leave plasma mode during a cut")
-            sequence.plasma_mode = command.enabled
+            sequence.set_plasma_mode(command.enabled, f"T{command.tool} M6")
         elif isinstance(command, SetCutParams):
             sequence.set_params(command.params)  # a later G200 overwrites; takes effect next cut
         elif isinstance(command, LegacyMode):
-            if sequence.busy:
-                raise CommandError("G200", "cannot switch to legacy mode during a cut")
-            sequence.g200_active = False
+            sequence.legacy_mode()
         elif isinstance(command, ThcEnable):
             sequence.set_thc(command.enabled, command.z_feed_mm_min)
         elif isinstance(command, TorchEnable):
             sequence.enable_torch(command.enabled)
         elif isinstance(command, SelectMaterial):
-            word = command.word or f"M190 P{command.number}"
-            try:
-                material = self.materials.get(
-                    self.materials.initial if command.number == -1 else command.number,
-                    where=word,
-                )
-            except MaterialError as exc:
-                raise CommandError(word, exc.reason) from None
-            data = self._use_material(material, word)
-            self.materials.select(command.number)
-            return Outcome(data=data)
+            return Outcome(data=self._select_material(command))
         elif isinstance(command, DefineMaterial):
             return self._define_material(command.comment)
         elif isinstance(command, VoltageAdjust):
             sequence.adjust_voltage(command.delta_v)
             return Outcome(
-                data={"target_v": sequence.thc.target_v, "offset_v": sequence.voltage_offset_v}
+                data={"target_v": sequence.target_v, "offset_v": sequence.voltage_offset_v}
             )
         elif isinstance(command, ResumePoint):
             point = ResumeTrack(command.line, len(self.resume_points))
@@ -284,57 +265,44 @@ class PlasmaController:
         elif isinstance(command, SelectCurrent):
             sequence.request_current(command.current_a)
         elif isinstance(command, VoltageMode):
-            volts = None if command.auto else command.volts
-            sequence.set_params(replace(sequence.params, cut_voltage_v=volts))
+            sequence.set_cut_voltage(None if command.auto else command.volts)
         elif isinstance(command, OperatingMode):
-            if sequence.busy:
-                raise CommandError("operating_mode", "cannot change the mode during a cut")
-            sequence.mode = command.mode
+            sequence.set_operating_mode(command.mode)
         elif isinstance(command, VelocityReduction):
-            sequence.velocity_percent = command.percent if command.percent > 0 else 100.0
+            pass  # the sender slows its motion; the THC sees the slower speed as anti-dive
         elif isinstance(command, CycleStart):
-            if sequence.state is not State.S1_WAIT:
-                raise CommandError(
-                    "cycle_start", f"nothing waits for cycle start ({sequence.state})"
-                )
             sequence.cycle_start(now)
         elif isinstance(command, Rearm):
-            if sequence.state is not State.FAULTED:
-                raise CommandError("rearm", f"nothing to re-arm ({sequence.state})")
             sequence.rearm(now)
         elif isinstance(command, HeightOverride):
-            return Outcome(data=self._override_height(command))
+            height = sequence.step_height_override(command.step_mm, command.reset)
+            return Outcome(data={"height_override_mm": height, "target_v": sequence.target_v})
         elif isinstance(command, Abort):
-            busy = sequence.busy
-            sequence.abort("stopped by the operator")
-            return Outcome(data={"aborted": busy})
+            return Outcome(data={"aborted": sequence.abort("stopped by the operator")})
         elif isinstance(command, ThcHold):
-            # A pause holds Z; a lit cut is ended (docs/DESIGN.md invariant 7), whoever asks.
-            sequence.thc.held = command.on
-            ended = command.on and sequence.pause(now, "paused by the operator")
+            ended = sequence.hold_thc(now, command.on)
             return Outcome(data={"thc_held": command.on, "cut_ended": ended})
-        elif isinstance(command, OhmicTest | ProbeTest | JogZ):
-            return self._operator_test(command, now)
+        elif isinstance(command, OhmicTest):
+            sequence.ohmic_test(now)
+        elif isinstance(command, ProbeTest):
+            sequence.probe_test(now)
+            return Outcome(deferred=True)
+        elif isinstance(command, JogZ):
+            sequence.jog_z(now, command.mm, command.feed_mm_min)
+            return Outcome(deferred=True)
         return Outcome()
 
-    def _operator_test(self, command: OhmicTest | ProbeTest | JogZ, now: float) -> Outcome:
-        """The panel's ohmic test, probe test and Z jog: with the table idle only."""
-        sequence = self.sequence
-        name = {OhmicTest: "ohmic_test", ProbeTest: "probe_test", JogZ: "jog_z"}[type(command)]
-        if sequence.state is State.FAULTED:
-            raise CommandError(name, f"re-arm required after: {sequence.error}")
-        if sequence.busy:
-            raise CommandError(name, f"not during a cut ({sequence.state})")
-        if isinstance(command, OhmicTest):
-            sequence.ohmic_test(now)
-            return Outcome()
-        if isinstance(command, ProbeTest):
-            error = sequence.probe_test(now)
-        else:
-            error = sequence.jog_z(now, command.mm, command.feed_mm_min)
-        if error is not None:
-            raise CommandError(name, error)
-        return Outcome(deferred=True)
+    def _select_material(self, command: SelectMaterial) -> dict[str, Any]:
+        word = command.word or f"M190 P{command.number}"
+        try:
+            material = self.materials.get(
+                self.materials.initial if command.number == -1 else command.number, where=word
+            )
+        except MaterialError as exc:
+            raise CommandError(word, exc.reason) from None
+        data = self._use_material(material, word)
+        self.materials.select(command.number)
+        return data
 
     def _define_material(self, comment: str) -> Outcome:
         word = f"({comment})"
@@ -360,67 +328,8 @@ class PlasmaController:
             store=material if magic.option in (1, 2) else None,
         )
 
-    def _program_z(self, command: ProgramZMove | ProbeSurface | SetWorkZ, now: float) -> Outcome:
-        """Z words of the program: Z belongs to the board, so they come here, not to motion."""
-        sequence = self.sequence
-        word = {ProgramZMove: "Z", ProbeSurface: "G38.2", SetWorkZ: "G92 Z"}[type(command)]
-        if isinstance(command, ProbeSurface) and command.away:
-            word = "G38.4" if command.require_contact else "G38.5"
-        if sequence.state is State.FAULTED:
-            raise CommandError(word, f"re-arm required after: {sequence.error}")
-        if isinstance(command, SetWorkZ):
-            if sequence.busy and not sequence.in_relay_cut:
-                raise CommandError(word, f"not during a cut ({sequence.state})")
-            try:
-                sequence.set_work_z(command.z_mm)
-            except ValueError as exc:
-                raise CommandError(word, str(exc)) from None
-            return Outcome(data={"work_zero_mm": round(sequence.work_zero_mm, 3)})
-        if isinstance(command, ProbeSurface):
-            if sequence.busy:
-                raise CommandError(word, f"not during a cut ({sequence.state})")
-            sequence.probe_surface(
-                now,
-                sequence.work_zero_mm + command.z_mm,
-                command.feed_mm_min / 60.0,
-                command.require_contact,
-                away=command.away,
-            )
-            return Outcome(deferred=True)
-        target = command.z_mm if command.machine else sequence.work_zero_mm + command.z_mm
-        setup = sequence.config.setup_speed_mm_s
-        feed = setup if command.feed_mm_min is None else min(command.feed_mm_min / 60.0, setup)
-        ignored = sequence.move_z(now, target, feed)
-        if ignored is not None:
-            return Outcome(data={"ignored": ignored})
-        return Outcome(deferred=True)
-
-    def _probe_and_start(
-        self, p6: ProbeAndStart, now: float, xy_mm: tuple[float, float] | None
-    ) -> Outcome:
-        if not self.prepare_probe_and_start(p6):
-            return Outcome(data={"mode": p6.mode})
-        self.sequence.start(now, xy_mm)
-        return Outcome(deferred=True)
-
     def prepare_probe_and_start(self, p6: ProbeAndStart) -> bool:
         """Everything ``G100 P6`` sets before its start sequence; False for the special
         modes I2/I3, which only (re)set the values and start nothing. The preflight
         (:mod:`dthc_bridge.program.check`) records the cut here instead of starting it."""
-        sequence = self.sequence
-        params = replace(
-            sequence.params,
-            touch_feed_mm_min=p6.touch_feed_mm_min,
-            pierce_height_mm=p6.pierce_height_mm,
-            pierce_delay_ms=p6.pierce_delay_s * 1000.0,
-            cut_height_mm=p6.cut_height_mm,
-        )
-        sequence.set_params(params)
-        if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
-            return False
-        sequence.config = replace(sequence.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
-        # RosettaCNC has no T112 M6: P6 itself says the plasma tool is active.
-        sequence.plasma_mode = True
-        # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
-        sequence.set_thc(False)
-        return True
+        return self.sequence.set_probe_and_start(p6)

@@ -1,8 +1,8 @@
 """The plasma cut sequence: one state machine, events and a clock in, actions out.
 
-    IDLE -M3-> TO_PROBE_HEIGHT -> PROBING -> CREEP_UP -> TO_PIERCE -> TORCH_ON -> ARC_WAIT
-      -> PIERCE_DELAY -> [S1: S1_RAISE -> S1_WAIT -(cycle start)-> S1_LOWER -> S1_RELIGHT]
-      -> [PUDDLE_JUMP] -> TO_CUT_HEIGHT -> CUTTING -M5-> PAUSE_AT_END -> TO_SAFE -> IDLE
+    IDLE -M3-> TO_PROBE_HEIGHT -> PROBING -> CREEP_UP -> TO_PIERCE -> ARC_WAIT
+      -> PIERCE_DELAY -> [S1: S1_RAISE -> S1_WAIT -(cycle start)-> S1_LOWER -> ARC_WAIT]
+      -> [PUDDLE_JUMP] -> TO_CUT_HEIGHT -> CUTTING -M5-> [PAUSE_AT_END] -> TO_SAFE -> IDLE
 
 A relay cut (relay dialect, MASSO legacy mode) is only IDLE -M3-> ARC_WAIT -> CUTTING -M5->
 IDLE: the program probes (PROGRAM_PROBE), sets its Z origin and moves Z itself (Z_MOVE, or
@@ -12,6 +12,11 @@ Every fault while the torch may be lit (arc lost, breakaway, float/ohmic contact
 OK, Z limit, board fault, link down) ends in FAULTED: torch off, the sender told to pause,
 Z to safe height, touch-off required next time. FAULTED leaves only on an explicit re-arm
 (docs/DESIGN.md invariant 3). No I/O here: the driver executes the actions and reports back.
+
+What each state does with the board's events and with time is its handler's
+(:mod:`.states`); here: the commands (each one method, which owns its guard and raises
+:class:`CommandError` when refused), the events every state treats alike, and the steps the
+handlers and commands share. The target voltage is derived (:attr:`CutSequence.target_v`).
 """
 
 from __future__ import annotations
@@ -19,51 +24,29 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from enum import StrEnum
+from dataclasses import dataclass, replace
 from typing import Any
 
 from firmware_protocol.constants import InputMask
 
 from . import actions as act
-from .commands import CutParams, ThcMode
+from .auto_voltage import AutoVoltage, FitLimits
+from .commands import (
+    CommandError,
+    CutParams,
+    ProbeAndStart,
+    ProbeSurface,
+    ProgramZMove,
+    SetWorkZ,
+    ThcMode,
+)
+from .debounce import Edge, InputDebouncer
+from .states import HANDLERS, IN_A_CUT, State, StateHandler
 from .thc import Lock, ThcController
 
 __all__ = ["IN_A_CUT", "CutSequence", "SequenceConfig", "State"]
 
-
-class State(StrEnum):
-    IDLE = "idle"
-    TO_PROBE_HEIGHT = "to_probe_height"
-    PROBING = "probing"
-    CREEP_UP = "creep_up"
-    TO_PIERCE = "to_pierce_height"
-    TORCH_ON = "torch_on"
-    ARC_WAIT = "arc_wait"
-    RETRY_DELAY = "arc_retry_delay"
-    PIERCE_DELAY = "pierce_delay"
-    S1_RAISE = "s1_raise"
-    S1_WAIT = "s1_wait_cycle_start"
-    S1_LOWER = "s1_lower"
-    PUDDLE_JUMP = "puddle_jump"
-    TO_CUT_HEIGHT = "to_cut_height"
-    CUTTING = "cutting"
-    PAUSE_AT_END = "pause_at_end"
-    TO_SAFE = "to_safe_height"
-    FAULTED = "faulted"
-    OHMIC_TEST = "ohmic_test"
-    Z_MOVE = "program_z_move"
-    PROGRAM_PROBE = "program_probe"
-    PROBE_TEST = "probe_test"
-
-
-# From the M3 to the end of the cut: the states a pause ends (invariant 7). A cut's start
-# sequence is ended too, lit or not yet: its M3 is answered "paused" and sent again on resume.
-IN_A_CUT = frozenset({
-    State.TO_PROBE_HEIGHT, State.PROBING, State.CREEP_UP, State.TO_PIERCE, State.TORCH_ON,
-    State.ARC_WAIT, State.RETRY_DELAY, State.PIERCE_DELAY, State.S1_RAISE, State.S1_WAIT,
-    State.S1_LOWER, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT, State.CUTTING, State.PAUSE_AT_END,
-})  # fmt: skip
+_Z_UNKNOWN = "the torch's Z is not known yet (is the board online?)"
 
 
 @dataclass(frozen=True)
@@ -121,25 +104,31 @@ class SequenceConfig:
 @dataclass
 class _Cut:
     zero_mm: float  # surface, in carriage Z
-    probed: bool
     start_xy: tuple[float, float] | None
     attempts: int = 0
     arc_ok_since: float | None = None
     arc_lost_since: float | None = None
-    cutting_since: float | None = None
     at_speed_since: float | None = None
     thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
-    auto_v: list[float] = field(default_factory=list)
-    auto_d: list[float] = field(default_factory=list)  # distance cut at each auto_v sample
-    auto_v_since: float | None = None
+    auto_voltage: AutoVoltage | None = None  # this cut's estimate, without a G200 V voltage
     distance_mm: float = 0.0  # XY travel since the cut started (from the probed point)
-    auto_mean_v: float | None = None  # the auto target before the fit refined it
-    auto_fit_done: bool = False
     relit: bool = False
     ohmic_failed: int = 0
     relay: bool = False  # the program does the start sequence; M3 is the torch relay
     z_warned: bool = False  # a program Z move was ignored during this cut (warned once)
     torch_out: bool = False  # put out by a torch disable (over-cut): stays out until M5
+
+
+@dataclass
+class _ProbeRun:
+    """The last probe (a touch-off, the program's, the operator's test): what its end needs."""
+
+    sensor_ohmic: bool = False  # a touch-off's sensor: creep up until it releases
+    contact_z_mm: float = math.nan  # where the sensor fired
+    requires_contact: bool = True  # the program's G38.2/G38.4 (G38.3/G38.5: no error)
+    away: bool = False  # the program's probe runs up (G38.4/G38.5)
+    return_z_mm: float = math.nan  # a probe test goes back to this Z
+    error: str = ""  # a probe test without contact: the answer once back
 
 
 class CutSequence:
@@ -155,11 +144,11 @@ class CutSequence:
         self.mode = ThcMode.ARC_OK_AND_VOLTAGE
         self.thc_enabled = False  # M667 turns it on
         self.thc_z_feed_mm_min: float | None = None
-        self.velocity_percent = 100.0
         self.voltage_offset_v = 0.0  # torch up / torch down
         # PlasmaC's height override: the cut height raised (+) or lowered, as a change of the
         # target voltage through the THC slope; kept from cut to cut until the program ends.
         self.height_override_mm = 0.0
+        self._base_v: float | None = None  # the cut's voltage (G200 V, or auto), see target_v
         self.state = State.IDLE
         self.cut: _Cut | None = None
         self.last_zero_mm: float | None = None
@@ -170,9 +159,7 @@ class CutSequence:
         self.error = ""
         self.now = 0.0
         self._timer: float | None = None
-        self._inputs = 0
-        self._debounced = 0
-        self._pending_bits: dict[int, float] = {}
+        self._debouncer = InputDebouncer()
         self._z_mm = math.nan
         self._requested_mm_s: float | None = None
         self._xy_speed_mm_s: float | None = None
@@ -180,18 +167,13 @@ class CutSequence:
         self._voltages: deque[float] = deque(maxlen=10)
         self._actions: list[act.Action] = []
         self._move_token = 0
-        self._creep_sensor_ohmic = False
-        self._contact_z_mm = math.nan  # where the last probe's sensor fired
+        self._probe = _ProbeRun()
         self._pending_reply: str | None = None
         self.safe_z_mm = self.config.z_max_mm - self.config.top_margin_mm
         self.warnings: list[str] = []
         self.pierce_count = 0
         self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
         self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
-        self._probe_requires_contact = True
-        self._probe_away = False  # the program's probe runs up (G38.4/G38.5)
-        self._test_return_mm = math.nan  # a probe test goes back to this Z
-        self._test_error = ""  # a probe test without contact: the answer once back
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -216,8 +198,26 @@ class CutSequence:
         self._timer = None if timer_s is None else self.now + timer_s
 
     @property
+    def _handler(self) -> StateHandler:
+        return HANDLERS[self.state]
+
+    @property
     def busy(self) -> bool:
         return self.state not in (State.IDLE, State.FAULTED)
+
+    @property
+    def inputs(self) -> int:
+        """The debounced inputs (InputMask bits)."""
+        return self._debouncer.stable
+
+    def require_idle(self, word: str) -> None:
+        """The guard of every command that may not run during a cut."""
+        if self.busy:
+            raise CommandError(word, f"not during a cut ({self.state})")
+
+    def _require_armed(self, word: str) -> None:
+        if self.state is State.FAULTED:
+            raise CommandError(word, f"re-arm required after: {self.error}")
 
     def snapshot(self) -> dict[str, Any]:
         p = self.params
@@ -228,7 +228,7 @@ class CutSequence:
             "plasma_mode": self.plasma_mode,
             "g200_active": self.g200_active,
             "thc_enabled": self.thc_enabled,
-            "target_v": self.thc.target_v,
+            "target_v": self.target_v,
             "height_override_mm": self.height_override_mm,
             "slow_target_v": self.thc.slow_target_v,
             "voltage_v": self.thc.filtered_v,
@@ -252,26 +252,118 @@ class CutSequence:
             },
         }  # fmt: skip
 
+    # --- the target voltage ----------------------------------------------------------------
+
+    @property
+    def base_v(self) -> float | None:
+        """The cut's own voltage: G200 V, or what auto voltage measured; None until known."""
+        return self._base_v
+
+    @base_v.setter
+    def base_v(self, volts: float | None) -> None:
+        self._base_v = volts
+        self._apply_target()
+
+    @property
+    def target_v(self) -> float | None:
+        """The voltage the THC holds: the cut's own voltage, plus the operator's offset
+        (torch up/down) and the height override through the THC slope."""
+        if self._base_v is None:
+            return None
+        return self._base_v + self._override_v()
+
+    def _override_v(self) -> float:
+        return self.voltage_offset_v + self.height_override_mm * self.thc.config.slope_v_per_mm
+
+    def _apply_target(self) -> None:
+        """The one place the THC's target is written."""
+        self.thc.target_v = self.target_v
+
+    def _reset_thc(self) -> None:
+        """The THC starts afresh, the target with it (taken again for this cut)."""
+        self.thc.reset()
+        self.base_v = None
+
     # --- commands from the sender ----------------------------------------------------------
 
     def set_params(self, params: CutParams) -> None:
+        """G200 and its kin: takes effect at the next cut."""
         self.params = params
         self.g200_active = True
         self.relay_pierce_delay_s = 0.0
         self.thc.anti_dive_percent = params.anti_dive_percent
 
-    def program_positions(self, pierce_delay_s: float) -> None:
+    def set_cut_voltage(self, volts: float | None) -> None:
+        """A fixed cut voltage, or None for auto voltage."""
+        self.set_params(replace(self.params, cut_voltage_v=volts))
+
+    def program_positions(self, pierce_delay_s: float, word: str) -> None:
         """A material that positions nothing (QtPlasmaC's tube cutting): cuts start as the
         program's own (it probes and sets Z), with this pierce delay before M3 is answered."""
+        self.require_idle(word)
         self.g200_active = False
         self.relay_pierce_delay_s = pierce_delay_s
+
+    def set_material_timing(
+        self, pause_at_end_s: float, puddle_height_percent: float, puddle_delay_s: float
+    ) -> None:
+        """A material's pause at the end of a cut and puddle jump."""
+        self.config = replace(
+            self.config,
+            pause_at_end_s=pause_at_end_s,
+            puddle_height_percent=puddle_height_percent,
+            puddle_delay_s=puddle_delay_s,
+        )
+
+    def set_probe_and_start(self, p6: ProbeAndStart) -> bool:
+        """Everything ``G100 P6`` sets before its start sequence; False for the special
+        modes I2/I3, which only (re)set the values and start nothing."""
+        self.set_params(
+            replace(
+                self.params,
+                touch_feed_mm_min=p6.touch_feed_mm_min,
+                pierce_height_mm=p6.pierce_height_mm,
+                pierce_delay_ms=p6.pierce_delay_s * 1000.0,
+                cut_height_mm=p6.cut_height_mm,
+            )
+        )
+        if p6.mode in (2, 3):  # special modes: only (re)set the values the PLC shows
+            return False
+        self.config = replace(self.config, arc_ok_timeout_s=p6.arc_ok_timeout_s)
+        # RosettaCNC has no T112 M6: P6 itself says the plasma tool is active.
+        self.plasma_mode = True
+        # I0: THC armed but its comparator stays off until G100 P7 A1; I1: no THC.
+        self.set_thc(False)
+        return True
+
+    def set_plasma_mode(self, enabled: bool, word: str) -> None:
+        if self.busy and not enabled:
+            raise CommandError(word, "cannot leave plasma mode during a cut")
+        self.plasma_mode = enabled
+
+    def legacy_mode(self) -> None:
+        """MASSO's bare G200: the program does its own start sequence from now on."""
+        if self.busy:
+            raise CommandError("G200", "cannot switch to legacy mode during a cut")
+        self.g200_active = False
+
+    def set_operating_mode(self, mode: ThcMode) -> None:
+        if self.busy:
+            raise CommandError("operating_mode", "cannot change the mode during a cut")
+        self.mode = mode
+
+    def begin_program(self) -> None:
+        """A program starts: the torch enabled, no work Z origin, no height override."""
+        self.torch_enabled = True
+        self.work_origin_mm = None
+        self.override_height(0.0)  # the last program's override ends with it
 
     def set_thc(self, enabled: bool, z_feed_mm_min: float | None = None) -> None:
         if enabled and not self.thc_enabled and self.in_relay_cut:
             # A relay program switches the THC on at its cut height: the target is taken
             # afresh, once the THC delay has passed from now.
             assert self.cut is not None
-            self.thc.reset()
+            self._reset_thc()
             self.cut.arc_ok_since = self.now
             self.cut.at_speed_since = None
             self._last_thc_t = None
@@ -281,25 +373,39 @@ class CutSequence:
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = enabled
 
+    def hold_thc(self, now: float, on: bool) -> bool:
+        """The operator's pause holds Z; a lit cut is ended (docs/DESIGN.md invariant 7),
+        whoever asks. True when a cut was ended."""
+        self.thc.held = on
+        return on and self.pause(now, "paused by the operator")
+
     def request_current(self, current_a: float) -> None:
         """Plasma current set point (analog output): passed to the board as it comes."""
         self._emit(act.ApplyCurrent(current_a))
 
     def override_height(self, height_mm: float) -> None:
-        """Set the height override (the caller checks its bounds); a cut at height now follows
-        the new target at once."""
-        delta_v = (height_mm - self.height_override_mm) * self.thc.config.slope_v_per_mm
+        """Set the height override (step_height_override checks its bounds); a cut at
+        height follows the new target at once."""
         self.height_override_mm = height_mm
-        if self.thc.target_v is not None:
-            self.thc.target_v += delta_v
+        self._apply_target()
 
-    def _override_v(self) -> float:
-        return self.voltage_offset_v + self.height_override_mm * self.thc.config.slope_v_per_mm
+    def step_height_override(self, step_mm: float, reset: bool) -> float:
+        """PlasmaC's height override, by a step or back to 0, within half the cut height;
+        the new override."""
+        height = 0.0 if reset else round(self.height_override_mm + step_mm, 1)
+        bound = self.params.cut_height_mm / 2.0
+        if abs(height) > bound + 1e-9:
+            raise CommandError(
+                "height_override mm",
+                f"{height:+.1f} mm is beyond half the cut height (±{bound:.2f} mm)",
+            )
+        self.override_height(height)
+        return height
 
     def adjust_voltage(self, delta_v: float) -> None:
+        """Torch up / torch down: the offset stays until the next M3."""
         self.voltage_offset_v += delta_v
-        if self.thc.target_v is not None:
-            self.thc.target_v += delta_v
+        self._apply_target()
 
     def start(
         self, now: float, xy_mm: tuple[float, float] | None = None, *, relay: bool = False
@@ -318,21 +424,21 @@ class CutSequence:
         if not self.plasma_mode and not relay:
             self._reply(False, "not in plasma mode: send T112 M6 first")
             return
-        if self._debounced & (InputMask.OHMIC | InputMask.FLOAT | InputMask.BREAKAWAY):
+        if self.inputs & (InputMask.OHMIC | InputMask.FLOAT | InputMask.BREAKAWAY):
             self._fault("float, ohmic or breakaway active before the torch start")
             return
         self.error = ""
-        self.thc.reset()
         self.voltage_offset_v = 0.0
+        self._reset_thc()
         if relay or not self.g200_active:
             # The program did its own probe and Z moves: the torch relay, and the THC if the
             # program switches it on. The work Z origin is the cut's datum.
-            self.cut = _Cut(self.work_zero_mm, probed=False, start_xy=xy_mm, relay=True)
+            self.cut = self._new_cut(self.work_zero_mm, xy_mm, relay=True)
             self._torch_on()
             return
         if self._may_skip_probe(xy_mm):
             assert self.last_zero_mm is not None
-            self.cut = _Cut(self.last_zero_mm, probed=False, start_xy=xy_mm)
+            self.cut = self._new_cut(self.last_zero_mm, xy_mm)
             self._to_pierce()
             return
         cfg = self.config
@@ -342,9 +448,28 @@ class CutSequence:
             else cfg.z_min_mm + cfg.probe_height_mm
         )
         start_z = min(start_z, self.safe_z_mm)
-        self.cut = _Cut(math.nan, probed=True, start_xy=xy_mm)
+        self.cut = self._new_cut(math.nan, xy_mm)
         self._enter(State.TO_PROBE_HEIGHT)
         self._move(start_z, cfg.setup_speed_mm_s)
+
+    def _new_cut(
+        self, zero_mm: float, xy_mm: tuple[float, float] | None, *, relay: bool = False
+    ) -> _Cut:
+        cfg = self.config
+        limits = FitLimits(
+            max_plate_slope_v_per_mm=(
+                cfg.auto_voltage_max_plate_slope * self.thc.config.slope_v_per_mm
+            ),
+            min_span_mm=cfg.auto_voltage_min_span_mm,
+            max_residual_v=cfg.auto_voltage_max_residual_v,
+            max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
+        )
+        auto = AutoVoltage(
+            window_s=cfg.auto_voltage_window_s,
+            fit_window_s=cfg.auto_voltage_fit_window_s,
+            limits=limits if cfg.auto_voltage_fit else None,
+        )
+        return _Cut(zero_mm, start_xy=xy_mm, relay=relay, auto_voltage=auto)
 
     def _may_skip_probe(self, xy_mm: tuple[float, float] | None) -> bool:
         cfg = self.config
@@ -374,21 +499,23 @@ class CutSequence:
         self._end_cut()
 
     def cycle_start(self, now: float) -> None:
+        """After a stop after pierce (G200 S1): down to cut height and relight."""
+        if self.state is not State.S1_WAIT:
+            raise CommandError("cycle_start", f"nothing waits for cycle start ({self.state})")
         self.now = now
-        if self.state is State.S1_WAIT:
-            assert self.cut is not None
-            self._enter(State.S1_LOWER)
-            self._move(self._cut_z(), self.config.setup_speed_mm_s)
+        self._enter(State.S1_LOWER)
+        self._move(self._cut_z(), self.config.setup_speed_mm_s)
 
     def rearm(self, now: float) -> None:
         """Leave FAULTED explicitly (the operator has seen the error, which is then cleared);
         touch-off will follow."""
+        if self.state is not State.FAULTED:
+            raise CommandError("rearm", f"nothing to re-arm ({self.state})")
         self.now = now
-        if self.state is State.FAULTED:
-            self._emit(act.ResetFaults())
-            self._enter(State.IDLE)
-            self.probe_required = True
-            self.error = ""
+        self._emit(act.ResetFaults())
+        self._enter(State.IDLE)
+        self.probe_required = True
+        self.error = ""
 
     def pause(self, now: float, reason: str) -> bool:
         """The operator paused the program (docs/DESIGN.md invariant 7): a cut, lit or in its
@@ -399,9 +526,8 @@ class CutSequence:
         self.now = now
         if self.state not in IN_A_CUT:
             return False
-        cut = self.cut
-        if cut is not None and self.state is State.CUTTING:
-            self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
+        if self.cut is not None and self.state is State.CUTTING:
+            self.last_thc_active = self.thc_enabled and self.target_v is not None
         self.probe_required = True
         self._enter(State.TO_SAFE)
         self._torch_out_and_raise()
@@ -409,41 +535,42 @@ class CutSequence:
         self._emit(act.PauseProgram(reason, act.PauseCause.OPERATOR))
         return True
 
-    def probe_test(self, now: float) -> str | None:
+    def probe_test(self, now: float) -> None:
         """The operator's probe test, idle: touch off where the torch stands (the cut's
         sensors and feed), then back to the Z it started from; the surface found becomes
-        the plate's. Answered (CommandReply) once back; returns why not instead."""
+        the plate's. Answered (CommandReply) once back."""
+        self._require_armed("probe_test")
+        self.require_idle("probe_test")
         self.now = now
         if math.isnan(self._z_mm):
-            return "the torch's Z is not known yet (is the board online?)"
+            raise CommandError("probe_test", _Z_UNKNOWN)
         travel = self._z_mm - self.config.z_min_mm
         if travel <= 0.5:
-            return "the torch is at the bottom of its travel"
-        self._test_return_mm = self._z_mm
-        self._test_error = ""
+            raise CommandError("probe_test", "the torch is at the bottom of its travel")
+        self._probe.return_z_mm = self._z_mm
+        self._probe.error = ""
         self._pending_reply = "probe_test"
         self._enter(State.PROBE_TEST)
         ohmic = self.params.ohmic
         if ohmic:
             self._emit(act.SwitchOhmicSense(True))
-        self._emit(act.ProbeZ(self.params.touch_feed_mm_min / 60.0, travel, ohmic, True))
-        return None
+        self._emit(act.ProbeZ(self.params.touch_feed_mm_min / 60.0, travel, ohmic))
 
-    def jog_z(self, now: float, mm: float, feed_mm_min: float | None) -> str | None:
+    def jog_z(self, now: float, mm: float, feed_mm_min: float | None) -> None:
         """The operator's Z jog, idle: ``mm`` from where Z is (inside the travel); answered
-        when done. Returns why not instead."""
+        when done."""
+        self._require_armed("jog_z")
+        self.require_idle("jog_z")
         if math.isnan(self._z_mm):
-            return "the torch's Z is not known yet (is the board online?)"
-        setup = self.config.setup_speed_mm_s
-        feed = setup if feed_mm_min is None else min(feed_mm_min / 60.0, setup)
-        self._test_error = ""
-        return self.move_z(now, self._z_mm + mm, feed)
+            raise CommandError("jog_z", _Z_UNKNOWN)
+        self._probe.error = ""
+        self._move_z(now, self._z_mm + mm, self._feed_mm_s(feed_mm_min))
 
     def ohmic_test(self, now: float) -> None:
         """Ohmic sense on with the torch in the air: contact means a shorted torch."""
+        self._require_armed("ohmic_test")
+        self.require_idle("ohmic_test")
         self.now = now
-        if self.busy:
-            return
         self._emit(act.SwitchOhmicSense(True))
         self._enter(State.OHMIC_TEST, 0.1)
 
@@ -471,10 +598,21 @@ class CutSequence:
     def in_relay_cut(self) -> bool:
         return self.cut is not None and self.cut.relay and self.state is State.CUTTING
 
-    def move_z(self, now: float, target_mm: float, feed_mm_s: float) -> str | None:
-        """A program's Z move, in machine Z: answered (CommandReply "Z") when done. Returns
-        why it was ignored instead: during an automatic cut (PlasmaC strips them), or while
-        the THC holds the height of a relay cut; warned once per cut."""
+    def _feed_mm_s(self, feed_mm_min: float | None) -> float:
+        """A program's or the operator's Z feed, never above the setup speed."""
+        setup = self.config.setup_speed_mm_s
+        return setup if feed_mm_min is None else min(feed_mm_min / 60.0, setup)
+
+    def program_z_move(self, now: float, command: ProgramZMove) -> str | None:
+        """A program's Z word (work Z, or machine Z with G53): answered (CommandReply "Z")
+        when done. Returns why it was ignored instead: during an automatic cut (PlasmaC
+        strips them), or while the THC holds the height of a relay cut; warned once per
+        cut."""
+        self._require_armed("Z")
+        target = command.z_mm if command.machine else self.work_zero_mm + command.z_mm
+        return self._move_z(now, target, self._feed_mm_s(command.feed_mm_min))
+
+    def _move_z(self, now: float, target_mm: float, feed_mm_s: float) -> str | None:
         self.now = now
         cut = self.cut
         if self.busy and not (self.in_relay_cut and not self.thc_enabled):
@@ -494,20 +632,19 @@ class CutSequence:
         self._move(clamped, feed_mm_s)
         return None
 
-    def probe_surface(
-        self,
-        now: float,
-        target_mm: float,
-        feed_mm_s: float,
-        require_contact: bool,
-        *,
-        away: bool = False,
-    ) -> None:
-        """The program's own probe (G38.2/G38.3): the board probes down with the touch-off
-        sensors and stops on contact; ``away`` (G38.4/G38.5): up until they release.
-        Answered (CommandReply "probe") with the outcome."""
+    def probe_surface(self, now: float, command: ProbeSurface) -> None:
+        """The program's own probe (G38.2/G38.3) to work Z ``command.z_mm``: the board
+        probes down with the touch-off sensors and stops on contact; ``away`` (G38.4/G38.5):
+        up until they release. Answered (CommandReply "probe") with the outcome."""
+        word = "G38.2"
+        if command.away:
+            word = "G38.4" if command.require_contact else "G38.5"
+        self._require_armed(word)
+        self.require_idle(word)
         self.now = now
         self._pending_reply = "probe"
+        target_mm = self.work_zero_mm + command.z_mm
+        away = command.away
         if away:
             top = self.config.z_max_mm - self.config.top_margin_mm
             travel = min(target_mm, top) - self._z_mm
@@ -518,27 +655,33 @@ class CutSequence:
         if math.isnan(travel) or travel <= 0:
             self._reply(False, f"probe target {target_mm:.3f} is not {where} the torch")
             return
-        if away and not self._debounced & (InputMask.FLOAT | InputMask.OHMIC):
+        if away and not self.inputs & (InputMask.FLOAT | InputMask.OHMIC):
             # As LinuxCNC: a probe away must start in contact, or it could never release.
             self._reply(False, "the touch-off sensors are already released: nothing to probe "
                         "away from (G38.4/G38.5 start in contact)")  # fmt: skip
             return
-        self._probe_requires_contact = require_contact
-        self._probe_away = away
+        self._probe.requires_contact = command.require_contact
+        self._probe.away = away
         self._enter(State.PROGRAM_PROBE)
         ohmic = self.params.ohmic
         if ohmic:
             self._emit(act.SwitchOhmicSense(True))
-        self._emit(act.ProbeZ(feed_mm_s, travel, ohmic, True, away=away))
+        self._emit(act.ProbeZ(command.feed_mm_min / 60.0, travel, ohmic, away=away))
 
-    def set_work_z(self, z_mm: float | None) -> None:
-        """G92 Z / G10 L20 Z: the current Z reads ``z_mm``; None (G92.1) clears the origin."""
-        if z_mm is None:
+    def set_work_z(self, command: SetWorkZ) -> float:
+        """G92 Z / G10 L20 Z: the current Z reads ``z_mm``; None (G92.1) clears the origin.
+        The machine Z of work Z 0 after it."""
+        word = "G92 Z"
+        self._require_armed(word)
+        if self.busy and not self.in_relay_cut:
+            raise CommandError(word, f"not during a cut ({self.state})")
+        if command.z_mm is None:
             self.work_origin_mm = None
-            return
-        if math.isnan(self._z_mm):
-            raise ValueError("the torch's Z is not known yet (is the board online?)")
-        self.work_origin_mm = self._z_mm - z_mm
+        elif math.isnan(self._z_mm):
+            raise CommandError(word, _Z_UNKNOWN)
+        else:
+            self.work_origin_mm = self._z_mm - command.z_mm
+        return self.work_zero_mm
 
     def enable_torch(self, enabled: bool) -> None:
         """PlasmaC M62-M65 P3. Disabled during a cut: the torch goes off and motion goes on
@@ -546,63 +689,26 @@ class CutSequence:
         Enabling never relights a cut: it counts from the next M3 (a disabled M3 runs the
         sequence without firing the torch, as PlasmaC's torch-disabled mode)."""
         self.torch_enabled = enabled
-        if not enabled and self.cut is not None and self.state in (
-            State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
-            State.CUTTING,
-        ):  # fmt: skip
+        if not enabled and self.cut is not None and self._handler.torch_lit:
             self.cut.torch_out = True
             self._emit(act.SwitchTorch(False), act.SetZVelocity(0.0))
 
-    # --- events from the board -------------------------------------------------------------
+    # --- events from the board: the state's handler, after what every state does -------------
 
     def on_inputs(self, bits: int, z_mm: float, now: float) -> None:
         """Raw input snapshot (from SAMPLES and EVENTs); debounced here."""
         self.now = now
         self._z_mm = z_mm
-        changed = bits ^ self._inputs
-        self._inputs = bits
-        while changed:
-            bit = changed & -changed
-            changed &= changed - 1
-            self._pending_bits[bit] = now
-        self._debounce(now)
+        self._on_edges(self._debouncer.feed(bits, now, self.config.input_debounce_s))
 
-    def _debounce(self, now: float) -> None:
-        for bit, since in list(self._pending_bits.items()):
-            if now - since >= self.config.input_debounce_s:
-                del self._pending_bits[bit]
-                before = self._debounced
-                self._debounced = (self._debounced & ~bit) | (self._inputs & bit)
-                if before != self._debounced:
-                    self._on_edge(bit, bool(self._debounced & bit))
-
-    def _on_edge(self, bit: int, active: bool) -> None:
-        cutting = self.state in (
-            State.ARC_WAIT, State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT,
-            State.CUTTING, State.PAUSE_AT_END,
-        )  # fmt: skip
-        if bit == InputMask.BREAKAWAY and active and self.busy:
-            self._fault("breakaway switch tripped")
-        elif bit == InputMask.ESTOP and active:
-            self._fault("E-stop")
-        elif (
-            bit in (InputMask.FLOAT, InputMask.OHMIC) and active and cutting and self._arc_ok_seen()
-        ):
-            self._fault(
-                f"{'float switch' if bit == InputMask.FLOAT else 'ohmic contact'} during the cut"
-            )
-        elif bit == InputMask.OHMIC and active and self.state is State.OHMIC_TEST:
-            self._emit(act.SwitchOhmicSense(False))
-            self._fault("ohmic test: contact with the torch in the air (shorted torch?)")
-        elif (
-            bit in (InputMask.FLOAT, InputMask.OHMIC)
-            and not active
-            and self.state is State.CREEP_UP
-        ):
-            self._released()
-
-    def _arc_ok_seen(self) -> bool:
-        return self.cut is not None and self.cut.arc_ok_since is not None
+    def _on_edges(self, edges: list[Edge]) -> None:
+        for edge in edges:
+            if edge.bit == InputMask.BREAKAWAY and edge.active and self.busy:
+                self._fault("breakaway switch tripped")
+            elif edge.bit == InputMask.ESTOP and edge.active:
+                self._fault("E-stop")
+            else:
+                self._handler.on_edge(self, edge)
 
     def _arc_ok(self) -> bool:
         if self.config.dry_run or not self.torch_enabled:
@@ -611,7 +717,7 @@ class CutSequence:
             return True  # put out on purpose (over-cut): no arc is no arc loss
         if self.mode is ThcMode.VOLTAGE_ONLY:
             return self._voltage_arc_ok()
-        return bool(self._debounced & InputMask.ARC_OK)
+        return bool(self.inputs & InputMask.ARC_OK)
 
     def _voltage_arc_ok(self) -> bool:
         cfg = self.config
@@ -625,124 +731,13 @@ class CutSequence:
     def on_probe_done(
         self, contact: bool, ohmic: bool, contact_z_mm: float, stop_z_mm: float
     ) -> None:
-        if self.state is State.PROBE_TEST:
-            self._z_mm = stop_z_mm
-            if self.params.ohmic:
-                self._emit(act.SwitchOhmicSense(False))
-            if contact:
-                offset = self.config.ohmic_offset_mm if ohmic else self.config.float_travel_mm
-                self.last_zero_mm = contact_z_mm + offset
-            else:
-                self._test_error = "no contact while probing (plate missing or Z min reached)"
-            self._enter(State.Z_MOVE)  # back where it started; answered there
-            self._move(self._test_return_mm, self.config.setup_speed_mm_s)
-            return
-        if self.state is State.PROGRAM_PROBE:
-            self._z_mm = stop_z_mm
-            if self.params.ohmic:
-                self._emit(act.SwitchOhmicSense(False))
-            self._enter(State.IDLE)
-            if contact or not self._probe_requires_contact:
-                self._reply(True)
-            elif self._probe_away:
-                self._reply(False, "the sensors never released while probing away (G38.4)")
-            else:
-                self._reply(False, "no contact while probing (plate missing or Z min reached)")
-            return
-        if self.state is not State.PROBING or self.cut is None:
-            return
-        cfg = self.config
-        self._z_mm = stop_z_mm
-        if not contact:
-            self._fault("no contact while probing down (plate missing or Z min reached)")
-            return
-        if self.params.ohmic and not ohmic and self.cut.ohmic_failed < cfg.ohmic_retries:
-            # Float fired before ohmic: retry ohmic from the start height, then accept float.
-            self.cut.ohmic_failed += 1
-            self._enter(State.TO_PROBE_HEIGHT)
-            self._move(stop_z_mm + cfg.probe_clearance_mm, cfg.setup_speed_mm_s)
-            return
-        self.cut.zero_mm = math.nan
-        self._creep_sensor_ohmic = ohmic
-        self._contact_z_mm = contact_z_mm
-        self._enter(State.CREEP_UP)
-        self._emit(act.SwitchOhmicSense(ohmic))
-        self._move(stop_z_mm + cfg.float_travel_mm + 2.0, cfg.creep_speed_mm_s)
-
-    def _released(self) -> None:
-        assert self.cut is not None
-        cfg = self.config
-        if self._creep_sensor_ohmic:
-            self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
-        else:
-            # The float switch closes at its travel but opens lower (hysteresis): the zero
-            # comes from where it closed, latched by the board on the way down; the creep
-            # up only lifts the torch off the plate.
-            self.cut.zero_mm = self._contact_z_mm + cfg.float_travel_mm
-        self.last_zero_mm = self.cut.zero_mm
-        self.probe_required = False
-        self._emit(act.SwitchOhmicSense(False))
-        self._to_pierce()  # the pierce move supersedes the creep
+        self._handler.on_probe_done(self, contact, ohmic, contact_z_mm, stop_z_mm)
 
     def on_motion_done(self, token: int, reached: bool, z_mm: float) -> None:
         self._z_mm = z_mm
         if token != self._move_token:
             return  # a move that a later one superseded
-        cfg = self.config
-        state = self.state
-        if not reached and state in (
-            State.TO_PROBE_HEIGHT,
-            State.TO_PIERCE,
-            State.TO_CUT_HEIGHT,
-            State.S1_LOWER,
-        ):
-            self._fault(f"Z move did not complete ({state})")
-            return
-        if state is State.Z_MOVE or (state is State.CUTTING and self._pending_reply == "Z"):
-            if state is State.Z_MOVE:
-                self._enter(State.IDLE)
-            error = self._test_error or ("" if reached else f"Z stopped at {z_mm:.3f} mm")
-            self._test_error = ""
-            self._reply(not error, error)
-            return
-        if state is State.TO_PROBE_HEIGHT:
-            assert self.cut is not None
-            use_ohmic = self.params.ohmic
-            self._enter(State.PROBING)
-            if use_ohmic:
-                self._emit(act.SwitchOhmicSense(True))
-            self._emit(
-                act.ProbeZ(
-                    self.params.touch_feed_mm_min / 60.0,
-                    max(0.5, z_mm - cfg.z_min_mm),
-                    use_ohmic,
-                    True,
-                )
-            )
-        elif state is State.CREEP_UP:
-            self._fault("touch-off sensor did not release while creeping up")
-        elif state is State.TO_PIERCE:
-            self._torch_on()
-        elif state is State.S1_RAISE:
-            self._enter(State.S1_WAIT)
-            self._emit(
-                act.PauseProgram(
-                    "stop after pierce: clean the surface, then cycle start",
-                    act.PauseCause.STOP_AFTER_PIERCE,
-                )
-            )
-        elif state is State.S1_LOWER:
-            assert self.cut is not None
-            self.cut.relit = True
-            self.cut.arc_ok_since = None
-            self._torch_on()
-        elif state is State.TO_CUT_HEIGHT:
-            self._start_cutting()
-        elif state is State.TO_SAFE:
-            self._enter(State.IDLE)
-            self._reply(True)
-        elif state is State.FAULTED:
-            pass
+        self._handler.on_motion_done(self, reached, z_mm)
 
     def on_board_fault(self, reason: str) -> None:
         if self.state is not State.FAULTED:
@@ -752,10 +747,13 @@ class CutSequence:
         if self.busy:
             self._fault(f"board link down: {reason}")
 
-    def abort(self, reason: str) -> None:
-        """Stop a running cut the safe way (sender lost, shutdown): the fault path."""
-        if self.busy:
-            self._fault(reason)
+    def abort(self, reason: str) -> bool:
+        """Stop a running cut the safe way (sender lost, shutdown, the operator): the fault
+        path. True when a cut was running."""
+        if not self.busy:
+            return False
+        self._fault(reason)
+        return True
 
     def on_action_failed(self, action: act.Action, error: str) -> None:
         if isinstance(action, act.SwitchTorch) and not action.on:
@@ -784,231 +782,65 @@ class CutSequence:
         self.thc.observe_speed(xy_speed_mm_s, self._requested_mm_s, now)
         dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
         self._last_thc_t = now
-        if self.state is State.CUTTING and not self._z_is_programs():
-            self._cutting_step(volts, period_s, dt)
-        else:
-            self.thc.filter(volts, period_s, now)
+        self._handler.on_batch(self, volts, period_s, dt)
         self.tick(now)
+
+    def tick(self, now: float) -> None:
+        """Time passes: debounced edges, the state's watch (arc OK, arc lost), its timer."""
+        self.now = now
+        self._on_edges(self._debouncer.poll(now, self.config.input_debounce_s))
+        handler = self._handler
+        if handler.watch(self, now):
+            return
+        if self._timer is None or now < self._timer:
+            return
+        self._timer = None
+        handler.on_timeout(self)
 
     def _z_is_programs(self) -> bool:
         """A relay cut with the THC off: Z is the program's (no velocity stream, which would
         supersede its moves on the board)."""
         return self.in_relay_cut and not self.thc_enabled
 
-    def _cutting_step(self, volts: Sequence[float], period_s: float, dt: float) -> None:
-        cut = self.cut
-        assert cut is not None
-        cfg = self.config
-        now = self.now
-        if self._xy_speed_mm_s is not None:
-            cut.distance_mm += self._xy_speed_mm_s * dt
-        locks = self.thc.locks(now)
-        # Anti-dive off (G200 A0): locks() never holds VELOCITY or NO_SPEED.
-        at_speed = Lock.VELOCITY not in locks and Lock.NO_SPEED not in locks
-        if not at_speed:
-            cut.at_speed_since = None
-        elif cut.at_speed_since is None:
-            cut.at_speed_since = now
-        # The voltage rise of a slow torch decays only some tens of ms after the machine is
-        # back at speed: take the target once it has been at speed a little while.
-        settled = (
-            cut.at_speed_since is not None and now - cut.at_speed_since >= cfg.at_speed_settle_s
-        )
-        # The THC delay guards the start transient, so it counts from arc OK; until it is
-        # over the THC may only raise the torch (ThcController.rise_only). A fixed target
-        # applies from the start; an auto target is taken as early as the transient allows,
-        # before the plate has drifted away from the height that was just probed (see
-        # _acquire_target).
-        arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
-        delay_done = now - arc_ok_since >= cfg.thc_delay_s
-        arc_lost_running = cut.arc_lost_since is not None or not self.torch_enabled or cut.torch_out
-        if self.params.cut_voltage_v is not None and self.thc.target_v is None:
-            self._acquire_target(now)  # known from the start: the THC may raise the torch
-        may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s
-        self.thc.frozen = self.thc.target_v is None or arc_lost_running or not delay_done
-        self.thc.rise_only = not arc_lost_running and not delay_done
-        if (
-            self.params.cut_voltage_v is None
-            and cut.auto_mean_v is not None
-            and not cut.auto_fit_done
-            and settled
-        ):
-            self._refine_auto_target(now)
-        if may_acquire and settled and self.thc.target_v is None:
-            self.thc.filter(volts, period_s, now)
-            self._acquire_target(now)
-            if self.thc.target_v is not None:
-                self.thc.frozen = arc_lost_running or not delay_done
-            velocity = 0.0
-        elif self.mode is ThcMode.ARC_OK_AND_UPDOWN:
-            self.thc.filter(volts, period_s, now)
-            velocity = self._updown_velocity()
-        else:
-            velocity = self.thc.update(volts, period_s, now, dt).velocity_mm_s
-        z_next = self._z_mm + velocity * dt
-        if velocity < 0 and z_next <= cfg.z_min_mm:
-            self._fault("Z min limit reached during THC")
-            return
-        if velocity > 0 and z_next >= cfg.z_max_mm - cfg.top_margin_mm:
-            self._fault("Z max limit reached during THC")
-            return
-        cut.thc_lift_mm = max(cut.thc_lift_mm, self._z_mm - self._cut_z())
-        self._emit(act.SetZVelocity(velocity))
-
-    def _updown_velocity(self) -> float:
-        if not self.thc_enabled or self.thc.frozen:
-            return 0.0
-        locks = self.thc.locks(self.now)
-        if Lock.VELOCITY in locks or Lock.NO_SPEED in locks:
-            return 0.0
-        speed = self.config.thc_updown_speed_mm_s
-        if self._debounced & InputMask.THC_UP:
-            return speed
-        if self._debounced & InputMask.THC_DOWN:
-            return -speed
-        return 0.0
-
     def _acquire_target(self, now: float) -> None:
+        """The cut's voltage: G200 V at once, else auto voltage's first estimate."""
         cut = self.cut
         assert cut is not None
         fixed = self.params.cut_voltage_v
         if fixed is not None:
-            self.thc.target_v = fixed + self._override_v()
+            self.base_v = fixed
             return
-        # Auto voltage (G200 V0, G100 P5 A1). Z has held the cut height set over the probed
-        # point since the cut started, so the voltage to hold is the one of the first
-        # centimetres: a warped plate drifts away under the held torch, and sampling after
-        # the THC delay (as PlasmaC does) put that drift into the target. So the mean over
-        # a short window as soon as the machine is at speed and the start transient has
-        # had auto_voltage_after_s; a window a void lock (a kerf, a spike) touches starts
-        # again.
-        cfg = self.config
-        if Lock.VOID in self.thc.locks(now):
-            cut.auto_v.clear()
-            cut.auto_d.clear()
-            cut.auto_v_since = None
-            return
-        if cut.auto_v_since is None:
-            cut.auto_v_since = now
-        filtered = self.thc.filtered_v
-        if filtered is not None:
-            cut.auto_v.append(filtered)
-            cut.auto_d.append(cut.distance_mm)
-        if now - cut.auto_v_since >= cfg.auto_voltage_window_s and cut.auto_v:
-            cut.auto_mean_v = sum(cut.auto_v) / len(cut.auto_v)
-            self.thc.target_v = cut.auto_mean_v + self._override_v()
+        assert cut.auto_voltage is not None
+        void = Lock.VOID in self.thc.locks(now)
+        mean_v = cut.auto_voltage.sample(now, self.thc.filtered_v, cut.distance_mm, void)
+        if mean_v is not None:
+            self.base_v = mean_v
 
     def _refine_auto_target(self, now: float) -> None:
-        """Keep sampling after the auto target was taken, the voltage less what the THC
-        moved Z from cut height (the voltage a held torch would read), and once
-        auto_voltage_fit_window_s has passed since the window began, replace the target by the
-        line's value at distance 0 (see SequenceConfig.auto_voltage_fit)."""
+        """Auto voltage's one correction by the line fit, from the voltage a held torch
+        would read (less what the THC moved Z from cut height)."""
         cut = self.cut
         assert cut is not None
-        cfg = self.config
-        if not cfg.auto_voltage_fit or cut.auto_v_since is None or cut.auto_mean_v is None:
-            cut.auto_fit_done = True
-            return
+        assert cut.auto_voltage is not None
         filtered = self.thc.filtered_v
-        if filtered is not None and Lock.VOID not in self.thc.locks(now):
-            lift = self._z_mm - self._cut_z()
-            cut.auto_v.append(filtered - self.thc.config.slope_v_per_mm * lift)
-            cut.auto_d.append(cut.distance_mm)
-        if now - cut.auto_v_since < cfg.auto_voltage_fit_window_s:
-            return
-        cut.auto_fit_done = True
-        fitted = self._auto_voltage(cut.auto_d, cut.auto_v)
-        if fitted is not None and self.thc.target_v is not None:
-            self.thc.target_v += fitted - cut.auto_mean_v
-
-    def _auto_voltage(self, distances: Sequence[float], volts: Sequence[float]) -> float | None:
-        """The voltage at distance 0 by a least-squares line through (distance, volts), or
-        None where the line is implausible (see SequenceConfig.auto_voltage_fit)."""
-        cfg = self.config
-        n = len(volts)
-        mean_v = sum(volts) / n
-        if not cfg.auto_voltage_fit or n < 3:
-            return None
-        mean_d = sum(distances) / n
-        sdd = sum((d - mean_d) ** 2 for d in distances)
-        if max(distances) - min(distances) < cfg.auto_voltage_min_span_mm or sdd <= 0.0:
-            return None
-        b = sum((d - mean_d) * (v - mean_v) for d, v in zip(distances, volts, strict=True)) / sdd
-        max_b = cfg.auto_voltage_max_plate_slope * self.thc.config.slope_v_per_mm
-        if abs(b) > max_b:
-            return None
-        half = n // 2
-        b1 = _slope(distances[:half], volts[:half])
-        b2 = _slope(distances[half:], volts[half:])
-        if b1 is None or b2 is None or abs(b1 - b2) > cfg.auto_voltage_max_slope_change:
-            return None  # not a line: the start transient's decay, a bend in the plate
-        a = mean_v - b * mean_d
-        residual = math.sqrt(
-            sum((v - a - b * d) ** 2 for d, v in zip(distances, volts, strict=True)) / n
-        )
-        if residual > cfg.auto_voltage_max_residual_v:
-            return None
-        return a
-
-    def tick(self, now: float) -> None:
-        self.now = now
-        self._debounce(now)
-        cut = self.cut
-        state = self.state
-        if state in (State.ARC_WAIT,) and cut is not None:
-            if self._arc_ok():
-                cut.arc_ok_since = now
-                self.pierce_count += 1
-                if cut.relay and self.relay_pierce_delay_s > 0:
-                    self._enter(State.PIERCE_DELAY, self.relay_pierce_delay_s)
-                elif cut.relay:
-                    self._start_cutting()  # the program does its own pierce delay
-                elif cut.relit:
-                    self._enter(State.TO_CUT_HEIGHT)
-                    self._start_cutting()
-                else:
-                    self._enter(State.PIERCE_DELAY, self.params.pierce_delay_ms / 1000.0)
-                return
-        elif (
-            state in (State.PIERCE_DELAY, State.PUDDLE_JUMP, State.TO_CUT_HEIGHT, State.CUTTING)
-            and cut
-        ):
-            if not self._arc_ok():
-                if cut.arc_lost_since is None:
-                    cut.arc_lost_since = now
-                elif now - cut.arc_lost_since >= self.config.arc_lost_delay_s:
-                    self._fault("arc lost", act.PauseCause.ARC_LOST)
-                    return
-            else:
-                cut.arc_lost_since = None
-        if self._timer is None or now < self._timer:
-            return
-        self._timer = None
-        if state is State.ARC_WAIT:
-            assert cut is not None
-            self._emit(act.SwitchTorch(False))
-            if cut.attempts >= self.config.arc_start_attempts:
-                self._fault(f"no arc OK after {cut.attempts} start attempts")
-            else:
-                self._enter(State.RETRY_DELAY, self.config.arc_retry_delay_s)
-        elif state is State.RETRY_DELAY:
-            self._torch_on()
-        elif state is State.PIERCE_DELAY:
-            self._after_pierce()
-        elif state is State.PUDDLE_JUMP:
-            self._enter(State.TO_CUT_HEIGHT)
-            self._move(self._cut_z(), self.config.setup_speed_mm_s)
-        elif state is State.PAUSE_AT_END:
-            self._end_cut()
-        elif state is State.OHMIC_TEST:
-            self._emit(act.SwitchOhmicSense(False))
-            self._enter(State.IDLE)
+        held_v = None
+        if filtered is not None:
+            held_v = filtered - self.thc.config.slope_v_per_mm * (self._z_mm - self._cut_z())
+        void = Lock.VOID in self.thc.locks(now)
+        fitted = cut.auto_voltage.refine(now, held_v, cut.distance_mm, void)
+        if fitted is not None and self._base_v is not None:
+            self.base_v = fitted
 
     # --- steps -----------------------------------------------------------------------------
 
     def _cut_z(self) -> float:
         assert self.cut is not None
         return self.cut.zero_mm + self.params.cut_height_mm
+
+    def _answer_z_move(self, reached: bool, z_mm: float) -> None:
+        error = self._probe.error or ("" if reached else f"Z stopped at {z_mm:.3f} mm")
+        self._probe.error = ""
+        self._reply(not error, error)
 
     def _to_pierce(self) -> None:
         assert self.cut is not None
@@ -1032,6 +864,22 @@ class CutSequence:
             self.warnings.append(f"safe height reduced to {top:.1f} mm (top of Z travel)")
             wanted = top
         self.safe_z_mm = wanted
+
+    def _released(self) -> None:
+        """The touch-off sensor released while creeping up: the surface is known."""
+        assert self.cut is not None
+        cfg = self.config
+        if self._probe.sensor_ohmic:
+            self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
+        else:
+            # The float switch closes at its travel but opens lower (hysteresis): the zero
+            # comes from where it closed, latched by the board on the way down; the creep
+            # up only lifts the torch off the plate.
+            self.cut.zero_mm = self._probe.contact_z_mm + cfg.float_travel_mm
+        self.last_zero_mm = self.cut.zero_mm
+        self.probe_required = False
+        self._emit(act.SwitchOhmicSense(False))
+        self._to_pierce()  # the pierce move supersedes the creep
 
     def _torch_on(self) -> None:
         cut = self.cut
@@ -1068,9 +916,8 @@ class CutSequence:
         cut = self.cut
         assert cut is not None
         self._enter(State.CUTTING)
-        cut.cutting_since = self.now
         self.last_cut_start_xy = cut.start_xy
-        self.thc.reset()
+        self._reset_thc()
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = self.thc_enabled
         self.thc.anti_dive_percent = self.params.anti_dive_percent
@@ -1080,7 +927,7 @@ class CutSequence:
         self._reply(True)  # M3 answered: XY motion may start
 
     def _end_cut(self) -> None:
-        self.last_thc_active = self.thc_enabled and self.thc.target_v is not None
+        self.last_thc_active = self.thc_enabled and self.target_v is not None
         self._emit(act.SetZVelocity(0.0), act.SwitchTorch(False))
         if self.cut is not None and self.cut.relay:
             self._enter(State.IDLE)  # the program raises Z itself (its G0 Z after M5)
@@ -1114,16 +961,3 @@ class CutSequence:
 
 def with_board_limits(config: SequenceConfig, z_min_mm: float, z_max_mm: float) -> SequenceConfig:
     return replace(config, z_min_mm=z_min_mm, z_max_mm=z_max_mm)
-
-
-def _slope(distances: Sequence[float], volts: Sequence[float]) -> float | None:
-    """The least-squares slope of volts against distances, None without a spread."""
-    n = len(volts)
-    if n < 3:
-        return None
-    mean_d = sum(distances) / n
-    mean_v = sum(volts) / n
-    sdd = sum((d - mean_d) ** 2 for d in distances)
-    if sdd <= 0.0:
-        return None
-    return sum((d - mean_d) * (v - mean_v) for d, v in zip(distances, volts, strict=True)) / sdd

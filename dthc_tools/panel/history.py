@@ -21,8 +21,7 @@ __all__ = ["CutHistory", "CutRecord", "CutRecorder"]
 
 # A cut starts when the sequence leaves idle (or faulted) into one of these ...
 START_STATES = frozenset({
-    "to_probe_height", "probing", "creep_up", "to_pierce_height", "torch_on", "arc_wait",
-    "cutting",
+    "to_probe_height", "probing", "creep_up", "to_pierce_height", "arc_wait", "cutting",
 })  # fmt: skip
 # ... the arc burns in these (a G200 S1 stop puts it out in s1_raise, a relight lights it)
 ARC_ON_STATES = frozenset({"pierce_delay", "puddle_jump", "to_cut_height", "cutting"})

@@ -85,13 +85,13 @@ def test_rosetta_g100_program_probes_starts_and_enables_the_comparator() -> None
 
 
 def test_plasmac_thc_and_velocity_reduction_lines() -> None:
-    """M65 P2 enables THC at once, M64 P2 disables; M67 E3 sets the velocity reduction."""
+    """M65 P2 enables THC at once, M64 P2 disables; M67 E3 (the velocity reduction, the
+    sender's to apply to its motion) is accepted and changes nothing in the controller."""
     controller = PlasmaController()
     for line in ("M65 P2", "M67 E3 Q60"):
         for command in parse_line(line).commands:
-            controller.handle(command, 0.0)
+            assert controller.handle(command, 0.0).data == {}
     assert controller.sequence.thc_enabled
-    assert controller.sequence.velocity_percent == 60.0
     for command in parse_line("M64 P2").commands:
         controller.handle(command, 0.0)
     assert not controller.sequence.thc_enabled

@@ -411,17 +411,25 @@ def test_auto_voltage_extrapolates_a_linear_plate_drift_back_to_the_probed_point
     voltage at distance 0 (the probed point, at cut height: 122 V) within 0.3 V, where their
     mean is 1.5 V off; a start transient still decaying (the halves' slopes differ) and a
     plate slope beyond 2 mm per 100 mm give no fit (the mean stays)."""
-    from dthc_bridge.controller.sequence import CutSequence
+    from dthc_bridge.controller.auto_voltage import FitLimits, fitted_voltage
+    from dthc_bridge.controller.sequence import SequenceConfig
+    from dthc_bridge.controller.thc import ThcConfig
 
-    sequence = CutSequence()
+    cfg = SequenceConfig()
+    limits = FitLimits(
+        max_plate_slope_v_per_mm=cfg.auto_voltage_max_plate_slope * ThcConfig().slope_v_per_mm,
+        min_span_mm=cfg.auto_voltage_min_span_mm,
+        max_residual_v=cfg.auto_voltage_max_residual_v,
+        max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
+    )
     distances = [25.0 + 0.5 * i for i in range(61)]
     ripple = [0.15 * ((-1) ** i) + 0.1 * ((i * 7) % 5 - 2) / 2 for i in range(61)]
     drift = [122.0 - 0.0375 * d + r for d, r in zip(distances, ripple, strict=True)]
-    fitted = sequence._auto_voltage(distances, drift)
+    fitted = fitted_voltage(distances, drift, limits)
     assert fitted is not None
     assert fitted == pytest.approx(122.0, abs=0.3)
     assert abs(sum(drift) / len(drift) - 122.0) > 1.0
     decaying = [122.0 + 6.0 * 0.9 ** (d - 25.0) for d in distances]
-    assert sequence._auto_voltage(distances, decaying) is None
+    assert fitted_voltage(distances, decaying, limits) is None
     steep = [122.0 - 0.3 * d for d in distances]
-    assert sequence._auto_voltage(distances, steep) is None
+    assert fitted_voltage(distances, steep, limits) is None

@@ -26,7 +26,7 @@ async def test_steps_move_the_target_voltage_through_the_thc_slope(
     service: ControllerService,
 ) -> None:
     sequence = service.sequence
-    sequence.thc.target_v = 118.0  # a cut at height
+    sequence.base_v = 118.0  # a cut at height
     for _ in range(5):
         result = await service.execute_request("height_override", {"mm": 0.1})
         assert result.ok, result.error
@@ -56,7 +56,7 @@ async def test_the_next_cut_takes_the_override_and_the_next_program_drops_it(
 
 async def test_the_end_of_the_program_resets_the_override(service: ControllerService) -> None:
     sequence = service.sequence
-    sequence.thc.target_v = 118.0
+    sequence.base_v = 118.0
     await service.execute_request("height_override", {"mm": 0.3})
     result = await service.execute_request("program_end", {})
     assert result.ok, result.error

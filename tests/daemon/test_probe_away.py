@@ -107,7 +107,7 @@ async def test_the_service_performs_probe_z_away_and_reports_the_release(
         done.set()
 
     monkeypatch.setattr(service.sequence, "on_probe_done", on_probe_done)
-    await service._perform(act.ProbeZ(1.0, 5.0, False, True, away=True))
+    await service._perform(act.ProbeZ(1.0, 5.0, False, away=True))
     await asyncio.wait_for(done.wait(), 10.0)
     ((contact, ohmic, contact_z, stop_z),) = heard
     assert (contact, ohmic) == (True, False)

@@ -1,0 +1,71 @@
+"""Auto voltage as a pure estimator: the mean over the first window, restarted by a void
+lock, then one refinement by a line fit back to distance 0."""
+
+from __future__ import annotations
+
+import pytest
+
+from dthc_bridge.controller.auto_voltage import AutoVoltage, FitLimits, fitted_voltage
+
+LIMITS = FitLimits(
+    max_plate_slope_v_per_mm=0.02 * 7.5,
+    min_span_mm=1.0,
+    max_residual_v=1.0,
+    max_slope_change_v_per_mm=0.05,
+)
+
+
+def test_the_mean_is_taken_once_the_window_is_full() -> None:
+    """Batches every 10 ms over a 50 ms window: no estimate before, the mean at 50 ms."""
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=LIMITS)
+    for i in range(5):
+        assert auto.sample(1.0 + 0.01 * i, 120.0 + i, 0.0, void=False) is None
+    assert auto.sample(1.05, 125.0, 0.0, void=False) == pytest.approx(122.5)
+    assert auto.mean_v == pytest.approx(122.5)
+    assert auto.wants_refining
+
+
+def test_a_void_lock_starts_the_window_again() -> None:
+    """A kerf crossed during the window: what was sampled before it is dropped."""
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=LIMITS)
+    auto.sample(1.00, 150.0, 0.0, void=False)
+    assert auto.sample(1.02, 160.0, 0.0, void=True) is None
+    for i in range(5):
+        assert auto.sample(1.03 + 0.01 * i, 120.0, 0.0, void=False) is None
+    assert auto.sample(1.08, 120.0, 0.0, void=False) == pytest.approx(120.0)
+
+
+def test_the_refinement_replaces_the_mean_by_the_voltage_at_distance_0() -> None:
+    """A plate drifting 0.0375 V per mm under the held torch, 100 mm/s: after the fit
+    window, the line's value at distance 0 (122 V), once."""
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=LIMITS)
+    t, d = 1.0, 10.0
+    mean = None
+    while mean is None:
+        mean = auto.sample(t, 122.0 - 0.0375 * d, d, void=False)
+        t, d = t + 0.01, d + 1.0
+    refined = None
+    while auto.wants_refining:
+        refined = auto.refine(t, 122.0 - 0.0375 * d, d, void=False)
+        t, d = t + 0.01, d + 1.0
+    assert refined == pytest.approx(122.0)
+    assert mean < 122.0 - 0.3
+    assert t - 1.0 == pytest.approx(0.31)
+
+
+def test_without_the_fit_the_mean_stays() -> None:
+    auto = AutoVoltage(window_s=0.0, fit_window_s=0.3, limits=None)
+    assert auto.sample(1.0, 120.0, 0.0, void=False) == 120.0
+    assert auto.refine(1.01, 121.0, 1.0, void=False) is None
+    assert not auto.wants_refining
+
+
+def test_implausible_lines_give_no_fit() -> None:
+    """Too few samples, too short a span, too steep a plate: None (the mean is kept)."""
+    distances = [float(d) for d in range(20)]
+    assert fitted_voltage(distances[:2], [120.0, 120.1], LIMITS) is None
+    assert fitted_voltage([0.0, 0.1, 0.2, 0.3], [120.0] * 4, LIMITS) is None
+    assert fitted_voltage(distances, [120.0 - 0.5 * d for d in distances], LIMITS) is None
+    assert fitted_voltage(distances, [120.0 - 0.01 * d for d in distances], LIMITS) == (
+        pytest.approx(120.0)
+    )
