@@ -95,6 +95,7 @@ class Import:
     path: Path
     line: int
     target: str  # what it imports, dotted: a module of ours, or a top-level third party
+    type_only: bool = False  # under ``if TYPE_CHECKING:``: for the type checker alone
 
     def __str__(self) -> str:
         return f"{self.path.relative_to(ROOT)}:{self.line} imports {self.target}"
@@ -128,19 +129,32 @@ def _resolve(importer: str, is_package: bool, node: ast.ImportFrom) -> str:
     return ".".join([*base, *([node.module] if node.module else [])])
 
 
+def _is_type_checking(node: ast.AST) -> bool:
+    test = node.test if isinstance(node, ast.If) else None
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
 def _imports_of(module: str, path: Path) -> Iterator[Import]:
     tree = ast.parse(path.read_text(), filename=str(path))
     is_package = path.name == "__init__.py"
+    type_only = {
+        id(inner)
+        for block in ast.walk(tree) if _is_type_checking(block)
+        for inner in ast.walk(block)
+    }  # fmt: skip
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
-                yield Import(module, path, node.lineno, alias.name)
+                yield Import(module, path, node.lineno, alias.name, id(node) in type_only)
         elif isinstance(node, ast.ImportFrom):
             base = _resolve(module, is_package, node)
             for alias in node.names:
                 # ``from pkg import sub`` imports the submodule when there is one
                 sub = f"{base}.{alias.name}"
-                yield Import(module, path, node.lineno, sub if sub in MODULES else base)
+                target = sub if sub in MODULES else base
+                yield Import(module, path, node.lineno, target, id(node) in type_only)
 
 
 ALL_IMPORTS = [imp for module, path in MODULES.items() for imp in _imports_of(module, path)]
@@ -220,10 +234,13 @@ def package_violations() -> list[str]:
 
 
 def module_cycles() -> list[list[str]]:
-    """Every import cycle between modules (Tarjan's strongly connected components)."""
+    """Every import cycle between modules (Tarjan's strongly connected components). A
+    type-only import does not close one: the state handlers (controller/states.py) name the
+    CutSequence that dispatches to them and that they act on, for the type checker only;
+    nothing is imported at run time, and the layer rules above still count it."""
     graph: dict[str, set[str]] = {m: set() for m in MODULES}
     for imp in ALL_IMPORTS:
-        if imp.target in MODULES and imp.target != imp.module:
+        if imp.target in MODULES and imp.target != imp.module and not imp.type_only:
             graph[imp.module].add(imp.target)
     index: dict[str, int] = {}
     low: dict[str, int] = {}
