@@ -100,6 +100,7 @@ class GrblBackend:
         self.streaming = streaming
         self.info = FirmwareInfo()
         self.status: StatusReport | None = None
+        self.status_line = ""  # the latest report as grbl wrote it (the grbl port's '?')
         self.position: tuple[float, float] = (float("nan"), float("nan"))
         self._speed_mm_s = 0.0
         self.figures = GrblFigures()
@@ -229,6 +230,7 @@ class GrblBackend:
             log.warning("grbl_status_unreadable", text=line, error=str(exc))
             return
         self.status = report
+        self.status_line = line
         self._status_seq += 1
         self._status_at = time.monotonic()
         self.figures.status_reports += 1
@@ -414,6 +416,11 @@ class GrblBackend:
                 "grbl is still in alarm after the reset: check the machine, then home ($H) "
                 "or unlock ($X) it from its console"
             )
+
+    def realtime(self, byte: int) -> None:
+        """A real-time command byte passed on as a sender wrote it (the grbl port):
+        overrides, jog cancel; the port handles ``?``, ``!``, ``~`` and reset itself."""
+        self._write(bytes([byte]))
 
     def feed_override(self, step: str) -> None:
         """``reset``, ``+10``, ``-10``, ``+1``, ``-1`` (grbl's real-time override bytes)."""

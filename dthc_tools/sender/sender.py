@@ -321,6 +321,58 @@ class Sender:
             self.progress.operator_paused = False
             self.progress.waiting_cycle_start = False
 
+    # --- a program that arrives line by line (the grbl port's sender streams it) -----------
+
+    async def open_stream(
+        self, *, dialect: Dialect | None = None, codes: Mapping[str, str] | None = None
+    ) -> ProgramPlan:
+        """Start a program whose lines come one at a time from another sender: the daemon's
+        program_start, then the plan in the dialect given or else the daemon's
+        ``controller.dialect`` (nothing ahead to detect one from), with the shop's codes
+        and the pins of the material in force. Each line then goes to :meth:`stream_line`;
+        :meth:`close_stream` ends the program."""
+        self.report = SendReport()
+        self._pause.clear()
+        self._pause_reason = ""
+        self._paused_cut = False
+        self.velocity_percent = 100.0
+        self.progress = Progress(running=True)
+        self._go.set()
+        started = await self.daemon.request("program_start")
+        daemon = _daemon_dialect(started)
+        chosen = dialect or (daemon[0] if daemon is not None else Dialect.MASSO)
+        self.report.dialect = str(chosen)
+        plan = ProgramPlan([], chosen, _code_table(started, codes))
+        plan.note_pins(started)
+        return plan
+
+    async def stream_line(self, plan: ProgramPlan, text: str) -> None:
+        """One more line, its steps run as a whole program's are (motion queued, daemon
+        lines after the motion before them, an M3 answered when XY may move). Raises
+        CommandError for a refused line (nothing of it ran), DaemonError or BackendError
+        when it failed, and BackendError while the program is paused."""
+        number = len(plan.lines) + 1
+        self.progress.line = self.progress.total_lines = number
+        for step in plan.stream(text):
+            if self._pause.is_set():
+                break
+            report = self.report
+            report.lines_run.add(number)
+            await self._step(step, plan, report)
+        if self._pause.is_set():
+            raise BackendError(f"paused: {self._pause_reason}", line_number=number)
+
+    async def close_stream(self) -> None:
+        """The streamed program's end: its motion done, then program_end (the height
+        override resets, as at the end of any program)."""
+        try:
+            if not self._pause.is_set():
+                await self._wait_motion()
+        finally:
+            self.progress.running = False
+            with contextlib.suppress(DaemonError):
+                await self.daemon.request("program_end")
+
     async def _track(self, backend: Positioned) -> None:
         """Until cancelled: where the torch is, and the program line it is on (the path's
         segment there, searched forward from the last one among the lines sent so far)."""
@@ -369,8 +421,7 @@ class Sender:
             dialect, why = detect_dialect(lines, _daemon_dialect(started))
             log.info("dialect_detected", dialect=str(dialect), why=why)
         report.dialect = str(dialect)
-        shop_codes = started.get("codes")
-        table = {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
+        table = _code_table(started, codes)
         # Counted, and the path drawn, on a plan of its own: the running plan's NGC reads
         # the daemon's answers (cut-feed-rate after an M190), so its steps cannot be listed
         # ahead. This one reads the pins of the material in force at the start: a later
@@ -681,6 +732,13 @@ def _cuts_in(step: Step) -> int:
     if not isinstance(step, DaemonStep) or step.feed_note:
         return 0
     return sum(1 for command in step.parsed.commands if starts_cut(command))
+
+
+def _code_table(started: Mapping[str, Any], codes: Mapping[str, str] | None) -> dict[str, str]:
+    """The daemon's ``controller.codes`` (from its program_start answer), the sender's own
+    on top."""
+    shop_codes = started.get("codes")
+    return {**(shop_codes if isinstance(shop_codes, dict) else {}), **(codes or {})}
 
 
 def _daemon_dialect(started: Mapping[str, Any]) -> tuple[Dialect, str] | None:

@@ -1,0 +1,211 @@
+"""One grbl sender's session on the port: its lines run in order through the reference
+sender's own step logic (:meth:`~dthc_tools.sender.Sender.stream_line`), one answer each;
+its real-time bytes acted on at once.
+
+- A line's answer comes when it has been carried out as far as a program's line is before
+  the next one goes: motion queued on the table's grbl, a daemon line answered (an ``M3``
+  once XY may move). Lines the sender streamed behind it wait in the port, unanswered, so
+  nothing moves XY before the pierce.
+- A refused line: ``[MSG:<why>]``, then ``error:20`` (grbl's "unsupported command"), and
+  nothing of it ran; a line grbl refused: grbl's own ``error:N``. A line longer than the
+  receiver holds: ``error:11``.
+- ``M2``/``M30``: the program's end (its motion done, the daemon's program_end); the next
+  G-code line starts a new program.
+- ``?``: grbl's latest status report, as it wrote it. ``!``: the sender's pause (feed
+  hold; a lit cut is ended by the daemon: torch out, safe height). ``~``: cycle start (an
+  S1 stop, a pause with nothing lit), else passed to grbl. 0x18: the cut stopped, the
+  lines waiting dropped, grbl reset (its banner is the sender's sign that a reset
+  happened). Override bytes (0x80 and up): passed to grbl.
+
+Not yet (issue 32, open): ``$`` commands and their output passed through, jogs refused
+while lit, resuming a paused cut where the torch stands, the pty/TCP listeners and the
+``dthc-bridge grbl-port`` command.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable, Coroutine
+from typing import Any, Protocol
+
+import structlog
+
+from dthc_bridge.controller.commands import CommandError
+from dthc_bridge.controller.dialect import Dialect
+from dthc_bridge.controller.words import GcodeSyntaxError, words
+from dthc_bridge.program.plan import ProgramPlan
+
+from ..sender.backend import BackendError, MotionBackend
+from ..sender.daemon_client import DaemonError
+from ..sender.sender import Sender
+from .receiver import Line, RealTime, Receiver
+
+__all__ = ["PortBackend", "PortSession"]
+
+log = structlog.get_logger("dthc_tools.grbl_port")
+
+STATUS_QUERY, FEED_HOLD, CYCLE_START, SOFT_RESET = 0x3F, 0x21, 0x7E, 0x18
+UNSUPPORTED = 20  # grbl's "unsupported or invalid g-code command found in block"
+LINE_OVERFLOW = 11  # grbl's "max characters per line exceeded"
+BANNER = "Grbl 1.1h ['$' for help]"
+
+
+class PortBackend(MotionBackend, Protocol):
+    """The table's grbl as the port needs it: a motion backend, its latest status report
+    as written, and real-time bytes passed on."""
+
+    status_line: str
+
+    def realtime(self, byte: int) -> None: ...
+
+
+class PortSession:
+    def __init__(
+        self,
+        sender: Sender,
+        grbl: PortBackend,
+        write: Callable[[bytes], None],
+        *,
+        dialect: Dialect | None = None,
+        codes: dict[str, str] | None = None,
+    ) -> None:
+        self.sender = sender
+        self.grbl = grbl
+        self._write = write
+        self.dialect = dialect
+        self.codes = codes or {}
+        self.receiver = Receiver()
+        self._lines: asyncio.Queue[Line] = asyncio.Queue()
+        self._plan: ProgramPlan | None = None
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._current: asyncio.Task[list[str]] | None = None  # the line being carried out
+        self.answered = 0
+
+    # --- from the sender -------------------------------------------------------------------
+
+    def received(self, data: bytes) -> None:
+        for item in self.receiver.feed(data):
+            if isinstance(item, RealTime):
+                self._realtime(item.byte)
+            else:
+                self._lines.put_nowait(item)
+
+    def _realtime(self, byte: int) -> None:
+        if byte == STATUS_QUERY:
+            if self.grbl.status_line:
+                self._say(self.grbl.status_line)
+        elif byte == FEED_HOLD:
+            self._background(self.sender.pause())
+        elif byte == CYCLE_START:
+            progress = self.sender.progress
+            if progress.waiting_cycle_start or progress.operator_paused:
+                self._background(self.sender.cycle_start())
+            else:
+                self.grbl.realtime(byte)
+        elif byte == SOFT_RESET:
+            self._background(self._reset())
+        else:
+            self.grbl.realtime(byte)
+
+    # --- the lines, in order ---------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Until cancelled: each line carried out, then answered."""
+        try:
+            while True:
+                line = await self._lines.get()
+                current = self._current = asyncio.ensure_future(self._answer(line))
+                await asyncio.wait({current})
+                self._current = None
+                if current.cancelled():
+                    continue  # a reset: grbl forgets the line, so the sender does too
+                for text in current.result():
+                    self._say(text)
+                self.answered += 1
+        finally:
+            if self._current is not None:
+                self._current.cancel()
+            for task in list(self._tasks):
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+
+    async def _answer(self, line: Line) -> list[str]:
+        if line.overflow:
+            return [f"error:{LINE_OVERFLOW}"]
+        text = line.text.strip()
+        if not text or _comment_only(text):
+            return ["ok"]
+        if self._plan is None:
+            self._plan = await self.sender.open_stream(dialect=self.dialect, codes=self.codes)
+        try:
+            await self.sender.stream_line(self._plan, text)
+        except CommandError as exc:
+            return [f"[MSG:{_one_line(str(exc))}]", f"error:{UNSUPPORTED}"]
+        except (DaemonError, BackendError) as exc:
+            log.warning("grbl_port_line_failed", line=text, error=str(exc))
+            return [f"[MSG:{_one_line(str(exc))}]", f"error:{_grbl_code(str(exc))}"]
+        if _ends_program(text):
+            await self._close()
+        return ["ok"]
+
+    async def _close(self) -> None:
+        if self._plan is not None:
+            self._plan = None
+            await self.sender.close_stream()
+
+    async def _reset(self) -> None:
+        """0x18: the cut stopped, the waiting lines dropped, grbl reset, the banner."""
+        while not self._lines.empty():
+            self._lines.get_nowait()
+        if self._current is not None:
+            self._current.cancel()  # an M3 waiting for the pierce: the daemon aborts it
+        self.receiver.reset()
+        if self._plan is not None:
+            self._plan = None
+            await self.sender.stop()
+        try:
+            await self.grbl.clear()
+        except BackendError as exc:
+            self._say(f"[MSG:{_one_line(str(exc))}]")
+        self._say(BANNER)
+
+    # --- to the sender ---------------------------------------------------------------------
+
+    def _say(self, text: str) -> None:
+        self._write(text.encode("ascii", "replace") + b"\r\n")
+
+    def _background(self, work: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.ensure_future(self._logged(work))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _logged(self, work: Coroutine[Any, Any, None]) -> None:
+        try:
+            await work
+        except (BackendError, DaemonError, CommandError) as exc:
+            self._say(f"[MSG:{_one_line(str(exc))}]")
+
+
+def _comment_only(text: str) -> bool:
+    with contextlib.suppress(GcodeSyntaxError):
+        return not words(text)
+    return False
+
+
+def _ends_program(text: str) -> bool:
+    try:
+        return any(letter == "M" and value in (2.0, 30.0) for letter, value in words(text))
+    except GcodeSyntaxError:
+        return False
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()).replace("]", ")")
+
+
+def _grbl_code(message: str) -> int:
+    """grbl's own code when grbl refused the line (``... error:N (...)``), else 20."""
+    _, found, rest = message.partition("error:")
+    number = rest.split(" ", 1)[0]
+    return int(number) if found and number.isdigit() else UNSUPPORTED

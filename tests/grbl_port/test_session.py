@@ -1,0 +1,172 @@
+"""A grbl sender's session on the port: one answer per line, in order; an M3's answer (and
+the lines streamed behind it) only once the daemon lets XY move; refusals the sender shows;
+real-time bytes at once."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Any
+
+from dthc_tools.grbl_port.session import BANNER, PortSession
+from dthc_tools.sender import Sender
+
+
+class Daemon:
+    """Answers every request; an M3 only once ``xy_may_move`` is set."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.requests: list[str] = []
+        self.xy_may_move = asyncio.Event()
+
+    async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
+        self.requests.append(name)
+        return {"dialect": "masso", "codes": {}} if name == "program_start" else {}
+
+    async def gcode(self, line: str, **_: Any) -> dict[str, Any]:
+        self.lines.append(line)
+        if line.startswith("M3"):
+            await self.xy_may_move.wait()
+        return {}
+
+    async def notify(self, name: str, /, **args: Any) -> None:
+        pass
+
+    def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
+        pass
+
+    def on_offline(self, handler: Callable[[], None]) -> None:
+        pass
+
+    def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None:
+        pass
+
+
+class Grbl:
+    status_line = "<Idle|MPos:0.000,0.000,0.000|FS:0,0>"
+
+    def __init__(self) -> None:
+        self.queued: list[str] = []
+        self.realtime_bytes: list[int] = []
+        self.cleared = 0
+
+    async def queue(self, line: str, *, source_line: int | None = None) -> None:
+        self.queued.append(line)
+
+    def add_motion_listener(self, listener: Callable[[float, str], None]) -> None:
+        pass
+
+    async def wait_idle(self) -> tuple[float, float]:
+        return 0.0, 0.0
+
+    async def hold(self) -> None:
+        pass
+
+    async def clear(self) -> None:
+        self.cleared += 1
+
+    async def resume(self) -> None:
+        pass
+
+    async def close(self) -> None:
+        pass
+
+    def realtime(self, byte: int) -> None:
+        self.realtime_bytes.append(byte)
+
+
+class Port:
+    def __init__(self) -> None:
+        self.daemon, self.grbl = Daemon(), Grbl()
+        self.out = bytearray()
+        self.session = PortSession(Sender(self.daemon, self.grbl), self.grbl, self.out.extend)
+
+    @property
+    def said(self) -> list[str]:
+        return self.out.decode().splitlines()
+
+    async def settle(self) -> None:
+        """Until the port has done all it can with what it was given (fakes answer at once)."""
+        for _ in range(200):
+            await asyncio.sleep(0)
+
+
+async def _with_port(body: Callable[[Port], Any]) -> Port:
+    port = Port()
+    runner = asyncio.ensure_future(port.session.run())
+    try:
+        await body(port)
+    finally:
+        runner.cancel()
+        await asyncio.gather(runner, return_exceptions=True)
+    return port
+
+
+async def test_lines_behind_an_m3_wait_for_the_pierce_and_every_line_gets_one_ok() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"G0 X10 Y10\nM3\nG1 X50 F2000\nG1 Y50\n")
+        await port.settle()
+        assert port.said == ["ok"]  # the rapid; the M3 waits for the daemon
+        assert port.grbl.queued == ["G0 X10 Y10"]  # nothing moves XY before the pierce
+        port.session.received(b"?")
+        await port.settle()
+        assert port.said[-1] == Grbl.status_line  # real-time: answered while lines wait
+        port.daemon.xy_may_move.set()
+        await port.settle()
+        assert port.said == ["ok", Grbl.status_line, "ok", "ok", "ok"]
+        assert port.grbl.queued == ["G0 X10 Y10", "G1 X50 F2000", "G1 Y50"]
+
+    port = await _with_port(body)
+    assert port.daemon.lines[0] == "M3"
+
+
+async def test_a_refused_line_is_shown_then_answered_with_an_error_and_the_next_runs() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"G200 P99999\nG1 X5 F100\n(comment)\n\n")
+        await port.settle()
+
+    port = await _with_port(body)
+    said = port.said
+    assert said[0].startswith("[MSG:G200")
+    assert said[0].endswith("]")
+    assert said[1:] == ["error:20", "ok", "ok", "ok"]
+    assert port.daemon.lines == ["G1 F100"]  # the feed note of the next line only
+    assert port.grbl.queued == ["G1 X5 F100"]
+
+
+async def test_an_overlong_line_is_error_11_and_a_program_end_ends_the_program() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"G1 X" + b"1" * 300 + b"\nG0 X1\nM30\nG0 X2\n")
+        await port.settle()
+
+    port = await _with_port(body)
+    assert port.said == ["error:11", "ok", "ok", "ok"]
+    assert port.daemon.requests == ["program_start", "program_end", "program_start"]
+
+
+async def test_a_reset_drops_the_waiting_lines_resets_grbl_and_says_the_banner() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"M3\nG1 X50 F2000\n")
+        await port.settle()
+        port.session.received(b"\x18")
+        await port.settle()
+        assert port.grbl.cleared == 1
+        assert port.said[-1] == BANNER
+        port.daemon.xy_may_move.set()
+        await port.settle()
+
+    port = await _with_port(body)
+    assert port.said == [BANNER]  # neither the M3 nor the line behind it is answered
+    assert "G1 X50 F2000" not in port.grbl.queued  # dropped: it waited behind the M3
+    assert "abort" in port.daemon.requests  # the cut the M3 started is stopped
+
+
+async def test_override_bytes_go_to_grbl_and_a_cycle_start_with_nothing_waiting_too() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"\x91~")
+        await port.settle()
+
+    port = await _with_port(body)
+    assert port.grbl.realtime_bytes == [0x91, ord("~")]
+    assert port.said == []
