@@ -135,6 +135,10 @@ TOOL_COMMANDS = {
     "panel": ToolCommand(
         "dthc_tools.panel.cli", "panel", "the operator panel: a web page beside the table"
     ),
+    "grbl-port": ToolCommand(
+        "dthc_tools.grbl_port.cli", "sender",
+        "a grbl for any grbl sender, in front of the table's grbl (in progress, issue 32)",
+    ),
     "bench": ToolCommand(
         "dthc_tools.bench.cli", "bench", "benchmark suites: codec, latency, control, soak, scale"
     ),

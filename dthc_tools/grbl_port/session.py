@@ -104,6 +104,13 @@ class PortSession:
             else:
                 self.grbl.realtime(byte)
         elif byte == SOFT_RESET:
+            # At once, as grbl does: what waits is gone before another byte is read, so
+            # lines the sender writes after the reset are kept.
+            while not self._lines.empty():
+                self._lines.get_nowait()
+            if self._current is not None:
+                self._current.cancel()  # an M3 waiting for the pierce: the daemon aborts it
+            self.receiver.reset()
             self._background(self._reset())
         else:
             self.grbl.realtime(byte)
@@ -155,12 +162,8 @@ class PortSession:
             await self.sender.close_stream()
 
     async def _reset(self) -> None:
-        """0x18: the cut stopped, the waiting lines dropped, grbl reset, the banner."""
-        while not self._lines.empty():
-            self._lines.get_nowait()
-        if self._current is not None:
-            self._current.cancel()  # an M3 waiting for the pierce: the daemon aborts it
-        self.receiver.reset()
+        """After 0x18 (the waiting lines already dropped): the cut stopped, grbl reset, the
+        banner."""
         if self._plan is not None:
             self._plan = None
             await self.sender.stop()
