@@ -17,9 +17,11 @@ its real-time bytes acted on at once.
   lines waiting dropped, grbl reset (its banner is the sender's sign that a reset
   happened). Override bytes (0x80 and up): passed to grbl.
 
-Not yet (issue 32, open): ``$`` commands and their output passed through, jogs refused
-while lit, resuming a paused cut where the torch stands, the pty/TCP listeners and the
-``dthc-bridge grbl-port`` command.
+- ``$`` lines (``$$``, ``$I``, ``$G``, ``$H``, ``$X``, ``$J=``): to grbl as written, its
+  output and answer back; a jog is refused (``error:8``) while a cut is lit.
+
+Not yet (issue 32, open): resuming a paused cut where the torch stands (``~`` after a
+pause that ended a cut), the dialect detected from the lines as they come.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import structlog
 
 from dthc_bridge.controller.commands import CommandError
 from dthc_bridge.controller.dialect import Dialect
+from dthc_bridge.controller.states import IN_A_CUT
 from dthc_bridge.controller.words import GcodeSyntaxError, words
 from dthc_bridge.program.plan import ProgramPlan
 
@@ -48,6 +51,8 @@ log = structlog.get_logger("dthc_tools.grbl_port")
 STATUS_QUERY, FEED_HOLD, CYCLE_START, SOFT_RESET = 0x3F, 0x21, 0x7E, 0x18
 UNSUPPORTED = 20  # grbl's "unsupported or invalid g-code command found in block"
 LINE_OVERFLOW = 11  # grbl's "max characters per line exceeded"
+NOT_IDLE = 8  # grbl's "'$' command cannot be used unless grbl is idle"
+LIT = frozenset(str(state) for state in IN_A_CUT)  # the daemon's states with a cut on
 BANNER = "Grbl 1.1h ['$' for help]"
 
 
@@ -58,6 +63,10 @@ class PortBackend(MotionBackend, Protocol):
     status_line: str
 
     def realtime(self, byte: int) -> None: ...
+
+    async def relay(self, text: str) -> list[str]:
+        """A ``$`` line sent to grbl as written: what it says back, its answer last."""
+        ...
 
 
 class PortSession:
@@ -143,6 +152,8 @@ class PortSession:
         text = line.text.strip()
         if not text or _comment_only(text):
             return ["ok"]
+        if text.startswith("$"):
+            return await self._relay(text)
         if self._plan is None:
             self._plan = await self.sender.open_stream(dialect=self.dialect, codes=self.codes)
         try:
@@ -155,6 +166,18 @@ class PortSession:
         if _ends_program(text):
             await self._close()
         return ["ok"]
+
+    async def _relay(self, text: str) -> list[str]:
+        """grbl's own commands (``$$``, ``$I``, ``$G``, ``$H``, ``$X``, ``$J=``) to grbl, its
+        answer back as it wrote it; a jog never while a cut is lit."""
+        if text[:3].upper() == "$J=":
+            state = (await self.sender.daemon.request("status")).get("state")
+            if state in LIT:
+                return [f"[MSG:jog refused: a cut is lit ({state})]", f"error:{NOT_IDLE}"]
+        try:
+            return await self.grbl.relay(text)
+        except BackendError as exc:
+            return [f"[MSG:{_one_line(str(exc))}]", f"error:{_grbl_code(str(exc))}"]
 
     async def _close(self) -> None:
         if self._plan is not None:

@@ -115,6 +115,7 @@ class GrblBackend:
         self._status_at = time.monotonic()
         self._banners = 0
         self._info_lines: list[str] | None = None  # collecting $I output
+        self._relayed: list[str] | None = None  # a relayed command's output, its answer last
         self._resetting = True  # a banner is expected (connect, clear), else a failure
         self._since_idle = 0  # lines sent since the last wait_idle
         self._wco: tuple[float, ...] | None = None
@@ -188,6 +189,12 @@ class GrblBackend:
         self._changed.set()
 
     def _on_line(self, line: str) -> None:
+        relayed = self._relayed
+        if relayed is not None and not line.startswith("<"):
+            relayed.append(line)  # a relayed command's output and answer: the caller's
+            if line == "ok" or line.startswith("error:"):
+                self._acknowledge()
+            return
         if line == "ok":
             self._acknowledge()
         elif line.startswith("error:"):
@@ -416,6 +423,25 @@ class GrblBackend:
                 "grbl is still in alarm after the reset: check the machine, then home ($H) "
                 "or unlock ($X) it from its console"
             )
+
+    async def relay(self, text: str) -> list[str]:
+        """A line a sender wrote for grbl itself (``$$``, ``$I``, ``$H``, ``$X``, ``$J=``), sent
+        once what is streaming has been answered: everything grbl says back, its ``ok`` or
+        ``error:N`` last. A refusal here is the sender's to show, not a failure of ours."""
+        self._raise_failure()
+        await self._until(lambda: not self._sent, None, "waiting for the lines before")
+        relayed: list[str] = []
+        self._relayed = relayed
+        try:
+            await self._send(text, None)
+            await self._until(
+                lambda: bool(relayed) and (relayed[-1] == "ok" or relayed[-1].startswith("error:")),
+                None if text.startswith("$H") else ANSWER_TIMEOUT_S,  # homing takes its time
+                f"no answer to {text}",
+            )  # fmt: skip
+        finally:
+            self._relayed = None
+        return relayed
 
     def realtime(self, byte: int) -> None:
         """A real-time command byte passed on as a sender wrote it (the grbl port):

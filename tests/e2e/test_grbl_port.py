@@ -91,14 +91,15 @@ async def test_a_grbl_sender_cuts_a_masso_program_through_the_port(tmp_path: Pat
             _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
         )
         try:
-            answers, said = await asyncio.to_thread(stream, port, PROGRAM)
+            answers, said = await asyncio.to_thread(stream, port, ["$$", *PROGRAM])
         finally:
             proc.terminate()
             await asyncio.to_thread(proc.wait, 10)
             log.close()
         result = await stack.finish()
     summary = summarize(result, options.telemetry_hz)
-    assert answers == ["ok"] * len(PROGRAM), (answers, said)
+    assert answers == ["ok"] * (1 + len(PROGRAM)), (answers, said)
+    assert "$110=" in said  # grbl's own settings, relayed as it wrote them
     assert "Grbl 1.1" in said  # the banner, after the reset
     assert "<Idle" in said or "<Run" in said  # ? answered with grbl's own report
     assert len(summary["cuts"]) == 2

@@ -19,9 +19,12 @@ class Daemon:
         self.lines: list[str] = []
         self.requests: list[str] = []
         self.xy_may_move = asyncio.Event()
+        self.state = "idle"
 
     async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         self.requests.append(name)
+        if name == "status":
+            return {"state": self.state}
         return {"dialect": "masso", "codes": {}} if name == "program_start" else {}
 
     async def gcode(self, line: str, **_: Any) -> dict[str, Any]:
@@ -50,6 +53,7 @@ class Grbl:
         self.queued: list[str] = []
         self.realtime_bytes: list[int] = []
         self.cleared = 0
+        self.relayed: list[str] = []
 
     async def queue(self, line: str, *, source_line: int | None = None) -> None:
         self.queued.append(line)
@@ -74,6 +78,10 @@ class Grbl:
 
     def realtime(self, byte: int) -> None:
         self.realtime_bytes.append(byte)
+
+    async def relay(self, text: str) -> list[str]:
+        self.relayed.append(text)
+        return ["$0=10", "$1=25", "ok"] if text == "$$" else ["ok"]
 
 
 class Port:
@@ -170,3 +178,18 @@ async def test_override_bytes_go_to_grbl_and_a_cycle_start_with_nothing_waiting_
     port = await _with_port(body)
     assert port.grbl.realtime_bytes == [0x91, ord("~")]
     assert port.said == []
+
+
+async def test_grbls_own_commands_pass_through_and_a_jog_is_refused_while_a_cut_is_lit() -> None:
+    async def body(port: Port) -> None:
+        port.session.received(b"$$\n$J=G91 X10 F1000\n")
+        await port.settle()
+        port.daemon.state = "cutting"
+        port.session.received(b"$J=G91 X10 F1000\n")
+        await port.settle()
+
+    port = await _with_port(body)
+    assert port.grbl.relayed == ["$$", "$J=G91 X10 F1000"]  # the second jog never reached grbl
+    assert port.said[:4] == ["$0=10", "$1=25", "ok", "ok"]
+    assert port.said[4].startswith("[MSG:jog refused: a cut is lit")
+    assert port.said[5] == "error:8"
