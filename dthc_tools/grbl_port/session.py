@@ -12,16 +12,19 @@ its real-time bytes acted on at once.
 - ``M2``/``M30``: the program's end (its motion done, the daemon's program_end); the next
   G-code line starts a new program.
 - ``?``: grbl's latest status report, as it wrote it. ``!``: the sender's pause (feed
-  hold; a lit cut is ended by the daemon: torch out, safe height). ``~``: cycle start (an
-  S1 stop, a pause with nothing lit), else passed to grbl. 0x18: the cut stopped, the
+  hold; a lit cut is ended by the daemon: torch out, safe height). A pause (the sender's,
+  an arc lost, a fault) holds the line in progress unanswered. ``~`` after it: the daemon
+  re-armed where it allows it, the cut's start sequence run where the torch stands, grbl
+  released, the held line carried on; after an S1 stop, the pierce's cycle start; with
+  nothing waiting, passed to grbl. 0x18: the cut stopped, the
   lines waiting dropped, grbl reset (its banner is the sender's sign that a reset
   happened). Override bytes (0x80 and up): passed to grbl.
 
 - ``$`` lines (``$$``, ``$I``, ``$G``, ``$H``, ``$X``, ``$J=``): to grbl as written, its
   output and answer back; a jog is refused (``error:8``) while a cut is lit.
 
-Not yet (issue 32, open): resuming a paused cut where the torch stands (``~`` after a
-pause that ended a cut), the dialect detected from the lines as they come.
+Not yet (issue 32, open): the dialect detected from the lines as they come (today: the
+one given, else the daemon's ``controller.dialect``).
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ class PortSession:
         self._plan: ProgramPlan | None = None
         self._tasks: set[asyncio.Task[None]] = set()
         self._current: asyncio.Task[list[str]] | None = None  # the line being carried out
+        self._resumed = asyncio.Event()  # cycle start has resumed a paused program
         self.answered = 0
 
     # --- from the sender -------------------------------------------------------------------
@@ -108,7 +112,9 @@ class PortSession:
             self._background(self.sender.pause())
         elif byte == CYCLE_START:
             progress = self.sender.progress
-            if progress.waiting_cycle_start or progress.operator_paused:
+            if self._plan is not None and self.sender.stream_paused:
+                self._background(self._resume(self._plan))
+            elif progress.waiting_cycle_start or progress.operator_paused:
                 self._background(self.sender.cycle_start())
             else:
                 self.grbl.realtime(byte)
@@ -156,13 +162,29 @@ class PortSession:
             return await self._relay(text)
         if self._plan is None:
             self._plan = await self.sender.open_stream(dialect=self.dialect, codes=self.codes)
+        plan = self._plan
         try:
-            await self.sender.stream_line(self._plan, text)
+            await self.sender.stream_line(plan, text)
         except CommandError as exc:
             return [f"[MSG:{_one_line(str(exc))}]", f"error:{UNSUPPORTED}"]
         except (DaemonError, BackendError) as exc:
-            log.warning("grbl_port_line_failed", line=text, error=str(exc))
-            return [f"[MSG:{_one_line(str(exc))}]", f"error:{_grbl_code(str(exc))}"]
+            failure: Exception | None = exc
+            while failure is not None and self.sender.stream_paused:
+                # Paused, not refused: the line waits unanswered (grbl holds its buffer the
+                # same way) until cycle start has resumed the program, then goes on.
+                log.info("grbl_port_line_held", line=text, reason=str(failure))
+                self._resumed.clear()
+                await self._resumed.wait()
+                try:
+                    await self.sender.stream_rest(plan)
+                    failure = None
+                except CommandError as refused:
+                    return [f"[MSG:{_one_line(str(refused))}]", f"error:{UNSUPPORTED}"]
+                except (DaemonError, BackendError) as again:
+                    failure = again
+            if failure is not None:
+                log.warning("grbl_port_line_failed", line=text, error=str(failure))
+                return [f"[MSG:{_one_line(str(failure))}]", f"error:{_grbl_code(str(failure))}"]
         if _ends_program(text):
             await self._close()
         return ["ok"]
@@ -178,6 +200,12 @@ class PortSession:
             return await self.grbl.relay(text)
         except BackendError as exc:
             return [f"[MSG:{_one_line(str(exc))}]", f"error:{_grbl_code(str(exc))}"]
+
+    async def _resume(self, plan: ProgramPlan) -> None:
+        """Cycle start after a pause: re-armed, the cut started again where the torch
+        stands when the pause ended it, grbl released; the held line goes on."""
+        await self.sender.resume_stream(plan)
+        self._resumed.set()
 
     async def _close(self) -> None:
         if self._plan is not None:

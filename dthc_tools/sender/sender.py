@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections import deque
 from collections.abc import Coroutine, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -24,6 +25,7 @@ import structlog
 from dthc_bridge.controller.commands import (
     CommandError,
     ResumePoint,
+    TorchStop,
     VelocityReduction,
 )
 from dthc_bridge.controller.dialect import Dialect
@@ -151,6 +153,8 @@ class Sender:
         self._reports: set[asyncio.Task[None]] = set()
         self.motion_reports = 0
         self.path: ProgramPath | None = None  # the running program's XY path
+        self._open_cut: DaemonStep | None = None  # the line that started the cut in progress
+        self._streamed: deque[Step] = deque()  # a streamed line's steps not yet carried out
         self.last_step = -1  # the last plan step sent: the torch is on the path up to it
 
     def _on_motion(self, speed_mm_s: float, state: str) -> None:
@@ -338,6 +342,8 @@ class Sender:
         self.velocity_percent = 100.0
         self.progress = Progress(running=True)
         self._go.set()
+        self._open_cut = None
+        self._streamed.clear()
         started = await self.daemon.request("program_start")
         daemon = _daemon_dialect(started)
         chosen = dialect or (daemon[0] if daemon is not None else Dialect.MASSO)
@@ -353,14 +359,54 @@ class Sender:
         when it failed, and BackendError while the program is paused."""
         number = len(plan.lines) + 1
         self.progress.line = self.progress.total_lines = number
-        for step in plan.stream(text):
-            if self._pause.is_set():
+        self.report.lines_run.add(number)
+        self._streamed = deque(plan.stream(text))
+        await self.stream_rest(plan)
+
+    async def stream_rest(self, plan: ProgramPlan) -> None:
+        """The current streamed line's steps not yet carried out (all of them, or those a
+        pause interrupted: :meth:`resume_stream` first). BackendError while paused."""
+        while self._streamed:
+            if not await self._step(self._streamed[0], plan, self.report):
                 break
-            report = self.report
-            report.lines_run.add(number)
-            await self._step(step, plan, report)
+            self._streamed.popleft()
         if self._pause.is_set():
-            raise BackendError(f"paused: {self._pause_reason}", line_number=number)
+            raise BackendError(f"paused: {self._pause_reason}", line_number=len(plan.lines))
+
+    @property
+    def stream_paused(self) -> bool:
+        """A streamed program paused (the operator's, an arc lost, a fault), to be resumed."""
+        return self.progress.running and self._pause.is_set()
+
+    async def resume_stream(self, plan: ProgramPlan) -> None:
+        """Cycle start after a streamed program paused: the daemon re-armed where it allows
+        it; when the pause ended a cut, its start sequence (the line that started it) run
+        where the torch stands; then the motion released. The interrupted line goes on with
+        :meth:`stream_rest`. Without a pause: :meth:`cycle_start`."""
+        if not self._pause.is_set():
+            await self.cycle_start()
+            return
+        try:
+            await self.daemon.request("rearm")
+        except DaemonError as exc:
+            if "nothing to re-arm" not in str(exc):
+                raise
+        await self.daemon_idle()
+        self._pause.clear()
+        self._pause_reason = ""
+        self._paused_cut = False
+        self.progress.operator_paused = False
+        self._go.set()
+        with contextlib.suppress(DaemonError):
+            await self.daemon.request("thc_hold", on=False)
+        cut = self._open_cut
+        if cut is not None:  # torch out mid-cut: pierce again here, XY still held
+            where = await self.backend.where() if isinstance(self.backend, Positioned) else None
+            xy = (where.x_mm, where.y_mm) if where is not None else None
+            log.info("cut_restarted_here", line=cut.source_line, xy=xy)
+            await self.daemon.gcode(cut.line, line_number=cut.source_line, xy=xy,
+                                    dialect=str(plan.dialect))  # fmt: skip
+        await self.backend.resume()
 
     async def close_stream(self) -> None:
         """The streamed program's end: its motion done, then program_end (the height
@@ -567,35 +613,41 @@ class Sender:
         except BackendError as exc:
             log.error("hold_failed", error=str(exc))
 
-    async def _step(self, step: Step, plan: ProgramPlan, report: SendReport) -> None:
+    async def _step(self, step: Step, plan: ProgramPlan, report: SendReport) -> bool:
+        """One step carried out; False when a pause came first and it did not go out (a
+        streamed program carries on with it after the pause)."""
         if self._pause.is_set():
-            return  # paused (a fault, the daemon gone): nothing more goes out, not even a note
+            return False  # paused (a fault, the daemon gone): nothing more goes out
         if isinstance(step, Refused):
             raise CommandError("", step.error)
         number = step.source_line
         if isinstance(step, MotionStep):
-            await self._unless_paused(
-                self.backend.queue(self._reduced(step.line, step.words), source_line=number)
-            )
+            line = self._reduced(step.line, step.words)
+            queued = await self._unless_paused(self._queue(line, number))
             report.lines_sent += 1
-            return
+            return queued is True
         if isinstance(step, DwellStep):
             await self._wait_motion()
-            if not self._pause.is_set():
-                await asyncio.sleep(step.seconds)
-            return
+            if self._pause.is_set():
+                return False
+            await asyncio.sleep(step.seconds)
+            return True
         dialect = str(plan.dialect)
         if step.feed_note:
             await self.daemon.gcode(step.line, line_number=step.source_line, dialect=dialect)
-            return
-        await self._daemon_line(step, plan, report)
+            return True
+        return await self._daemon_line(step, plan, report)
 
-    async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> None:
+    async def _queue(self, line: str, number: int) -> bool:
+        await self.backend.queue(line, source_line=number)
+        return True
+
+    async def _daemon_line(self, step: DaemonStep, plan: ProgramPlan, report: SendReport) -> bool:
         parsed = step.parsed
         xy = await self._wait_motion()
         await self._unless_paused(self._go.wait())  # an operator pause: not during it
         if self._pause.is_set():
-            return
+            return False
         cuts = sum(1 for command in parsed.commands if starts_cut(command))
         if cuts:
             report.cut_lines.append(step.source_line)  # where a restart re-cuts from
@@ -617,6 +669,10 @@ class Sender:
                 self.velocity_percent = command.percent if command.percent > 0 else 100.0
             if starts_cut(command):
                 report.cuts_started += 1
+                self._open_cut = step
+            elif isinstance(command, TorchStop):
+                self._open_cut = None
+        return True
 
     def _reduced(self, motion: str, words: tuple[Word, ...]) -> str:
         """The line as the machine runs it: feed scaled by a velocity reduction."""

@@ -45,9 +45,12 @@ PROGRAM = [
 BUDGET = 120  # CNCjs's character-counting budget (grbl's 128 less a margin)
 
 
-def stream(port: Path, lines: list[str], timeout_s: float = 90.0) -> tuple[list[str], str]:
+def stream(
+    port: Path, lines: list[str], timeout_s: float = 90.0, *, hold_after: int | None = None
+) -> tuple[list[str], str]:
     """Character counting as CNCjs does it; the answers (ok / error:N) in order, and every
-    other line the port said (banner, [MSG:...], status reports)."""
+    other line the port said (banner, [MSG:...], status reports). ``hold_after``: once
+    that many lines are answered, a feed hold (!), and cycle start (~) 1.5 s later."""
     answers: list[str] = []
     said: list[str] = []
     in_flight: list[int] = []
@@ -62,7 +65,14 @@ def stream(port: Path, lines: list[str], timeout_s: float = 90.0) -> tuple[list[
         pending = list(lines)
         deadline = time.monotonic() + timeout_s
         last_poll = 0.0
+        resume_at: float | None = None
         while (pending or in_flight) and time.monotonic() < deadline:
+            if hold_after is not None and len(answers) >= hold_after and resume_at is None:
+                link.write(b"!")
+                resume_at = time.monotonic() + 1.5
+            if resume_at is not None and time.monotonic() >= resume_at:
+                link.write(b"~")
+                resume_at = float("inf")
             while pending and sum(in_flight) + len(pending[0]) + 1 <= BUDGET:
                 line = pending.pop(0)
                 link.write(line.encode() + b"\n")
@@ -123,3 +133,32 @@ def _start_port(port: Path, grbl: Path, broker_port: int, base: str, log: Any) -
             raise RuntimeError(f"the grbl port did not start: see {log.name}")
         time.sleep(0.05)
     return proc
+
+
+async def test_a_feed_hold_mid_cut_puts_the_torch_out_and_cycle_start_relights(
+    tmp_path: Path,
+) -> None:
+    """! from the sender mid-cut: the daemon ends the cut (torch out, safe height), grbl
+    holds; ~ 1.5 s later: the cut pierces again where the torch stands and finishes."""
+    options = StackOptions(tmp_path, broker="mosquitto", motion="grbl")
+    port = tmp_path / "grbl-port"
+    program = ["G21 G90", "G0 X10 Y10", "M3", "G1 X150 Y10 F1500", "M5", "G0 X0 Y0", "M30"]
+    async with Stack(options) as stack:
+        log = (tmp_path / "grbl-port.log").open("w")
+        proc = await asyncio.to_thread(
+            _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
+        )
+        try:
+            answers, said = await asyncio.to_thread(stream, port, program, hold_after=4)
+        finally:
+            proc.terminate()
+            await asyncio.to_thread(proc.wait, 10)
+            log.close()
+        result = await stack.finish()
+    summary = summarize(result, options.telemetry_hz)
+    assert answers == ["ok"] * len(program), (answers, said)
+    spans = result.mock_exit["cuts"]
+    assert len(spans) == 2, spans  # the cut, then the same cut pierced again after the hold
+    assert spans[1]["start_t_s"] - (spans[0]["start_t_s"] + spans[0]["duration_s"]) > 1.0
+    assert summary["safety_violations"] == 0, summary["violations"]
+    assert summary["torch_on_at_exit"] is False

@@ -20,11 +20,14 @@ class Daemon:
         self.requests: list[str] = []
         self.xy_may_move = asyncio.Event()
         self.state = "idle"
+        self.cut_ended_on_hold = False
 
     async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
         self.requests.append(name)
         if name == "status":
             return {"state": self.state}
+        if name == "thc_hold" and args.get("on") and self.cut_ended_on_hold:
+            return {"cut_ended": True}  # the daemon put the torch out for the pause
         return {"dialect": "masso", "codes": {}} if name == "program_start" else {}
 
     async def gcode(self, line: str, **_: Any) -> dict[str, Any]:
@@ -54,6 +57,7 @@ class Grbl:
         self.realtime_bytes: list[int] = []
         self.cleared = 0
         self.relayed: list[str] = []
+        self.resumed = 0
 
     async def queue(self, line: str, *, source_line: int | None = None) -> None:
         self.queued.append(line)
@@ -71,7 +75,7 @@ class Grbl:
         self.cleared += 1
 
     async def resume(self) -> None:
-        pass
+        self.resumed += 1
 
     async def close(self) -> None:
         pass
@@ -193,3 +197,27 @@ async def test_grbls_own_commands_pass_through_and_a_jog_is_refused_while_a_cut_
     assert port.said[:4] == ["$0=10", "$1=25", "ok", "ok"]
     assert port.said[4].startswith("[MSG:jog refused: a cut is lit")
     assert port.said[5] == "error:8"
+
+
+async def test_a_feed_hold_mid_cut_holds_the_next_line_and_cycle_start_pierces_again() -> None:
+    async def body(port: Port) -> None:
+        port.daemon.xy_may_move.set()
+        port.daemon.cut_ended_on_hold = True
+        port.session.received(b"G0 X10 Y10\nM3\nG1 X50 F2000\n")
+        await port.settle()
+        assert port.said == ["ok", "ok", "ok"]
+        port.session.received(b"!")  # the torch goes out (the daemon), grbl holds
+        await port.settle()
+        port.session.received(b"G1 Y50\n")
+        await port.settle()
+        assert port.said == ["ok", "ok", "ok"]  # held, not refused
+        assert port.grbl.queued[-1] == "G1 X50 F2000"
+        port.session.received(b"~")
+        await port.settle()
+
+    port = await _with_port(body)
+    assert port.said == ["ok", "ok", "ok", "ok"]
+    assert port.grbl.queued[-1] == "G1 Y50"  # went on after the resume
+    assert port.daemon.lines.count("M3") == 2  # the cut started again where the torch stood
+    assert port.grbl.resumed == 1
+    assert "rearm" in port.daemon.requests
