@@ -136,7 +136,8 @@ TOOL_COMMANDS = {
         "dthc_tools.panel.cli", "panel", "the operator panel: a web page beside the table"
     ),
     "grbl-port": ToolCommand(
-        "dthc_tools.grbl_port.cli", "sender",
+        "dthc_tools.grbl_port.cli",
+        "sender",
         "a grbl for any grbl sender, in front of the table's grbl (in progress, issue 32)",
     ),
     "bench": ToolCommand(

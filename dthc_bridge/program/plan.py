@@ -230,6 +230,7 @@ class ProgramPlan:
         self._in_cut = False
         self._pierce_only_skip = False
         self._warned_filter = False
+        self._dialect_found = False  # a streamed plan has found its dialect in the lines
         self._probed = False  # a probe ran (G38.x/G31)
         self._touched_off = False  # ... and the program set its Z origin after it
 
@@ -309,15 +310,21 @@ class ProgramPlan:
                 yield Refused(line.source_line, self._written(line.source_line), str(exc))
             self._check_filter_params()
 
-    def stream(self, text: str) -> list[Step]:
+    def stream(self, text: str, *, detect: bool = False) -> list[Step]:
         """The steps of one more line of a program that arrives line by line, as a grbl
         sender streams it: the same rules as :meth:`steps`, with what the lines before it
         set (modal state, parameters, the touch-off). ``lines`` grows with each one; a
-        refused line is a :class:`Refused` and changes nothing after it."""
+        refused line is a :class:`Refused` and changes nothing after it.
+
+        ``detect``: the dialect is the one :func:`detect_dialect` finds in the lines so far,
+        from the first line that shows one on (until then, the plan's own): a stream has no
+        lines ahead to look at."""
         if not isinstance(self.lines, list):
             raise TypeError("a streamed plan starts from a list of lines (the ones so far)")
         self.lines.append(text)
         number = len(self.lines)
+        if detect and not self._dialect_found:
+            self._detect_streamed()
         try:
             if self.dialect is Dialect.MASSO:
                 evaluated: EvaluatedLine | None = EvaluatedLine(number, _strip_hash_comment(text))
@@ -334,6 +341,16 @@ class ProgramPlan:
             return [Refused(number, text.strip(), str(exc))]
         self._check_filter_params()
         return steps
+
+    def _detect_streamed(self) -> None:
+        dialect, why = detect_dialect(self.lines)
+        if not why.startswith("found"):
+            return
+        self._dialect_found = True
+        if dialect is not self.dialect:
+            self.warnings.append(f"dialect {dialect} from line {len(self.lines)} on ({why})")
+            self.dialect = dialect
+            self._codes = {**DEFAULT_CODES.get(dialect, {}), **self.codes}
 
     def _written(self, number: int) -> str:
         """Line ``number`` (1-based) of the program as the user wrote it."""

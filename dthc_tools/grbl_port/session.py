@@ -23,8 +23,8 @@ its real-time bytes acted on at once.
 - ``$`` lines (``$$``, ``$I``, ``$G``, ``$H``, ``$X``, ``$J=``): to grbl as written, its
   output and answer back; a jog is refused (``error:8``) while a cut is lit.
 
-Not yet (issue 32, open): the dialect detected from the lines as they come (today: the
-one given, else the daemon's ``controller.dialect``).
+The dialect: the one given, else detected from the lines as they come (the daemon's
+``controller.dialect`` until a line shows one).
 """
 
 from __future__ import annotations

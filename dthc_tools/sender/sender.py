@@ -155,6 +155,7 @@ class Sender:
         self.path: ProgramPath | None = None  # the running program's XY path
         self._open_cut: DaemonStep | None = None  # the line that started the cut in progress
         self._streamed: deque[Step] = deque()  # a streamed line's steps not yet carried out
+        self._detect_stream = False  # a streamed program's dialect comes from its lines
         self.last_step = -1  # the last plan step sent: the torch is on the path up to it
 
     def _on_motion(self, speed_mm_s: float, state: str) -> None:
@@ -331,9 +332,10 @@ class Sender:
         self, *, dialect: Dialect | None = None, codes: Mapping[str, str] | None = None
     ) -> ProgramPlan:
         """Start a program whose lines come one at a time from another sender: the daemon's
-        program_start, then the plan in the dialect given or else the daemon's
-        ``controller.dialect`` (nothing ahead to detect one from), with the shop's codes
-        and the pins of the material in force. Each line then goes to :meth:`stream_line`;
+        program_start, then the plan in the dialect given, or else detected from the lines as
+        they come (the daemon's ``controller.dialect`` until a line shows one: there are no
+        lines ahead to look at), with the shop's codes and the pins of the material in
+        force. Each line then goes to :meth:`stream_line`;
         :meth:`close_stream` ends the program."""
         self.report = SendReport()
         self._pause.clear()
@@ -346,6 +348,7 @@ class Sender:
         self._streamed.clear()
         started = await self.daemon.request("program_start")
         daemon = _daemon_dialect(started)
+        self._detect_stream = dialect is None
         chosen = dialect or (daemon[0] if daemon is not None else Dialect.MASSO)
         self.report.dialect = str(chosen)
         plan = ProgramPlan([], chosen, _code_table(started, codes))
@@ -360,7 +363,8 @@ class Sender:
         number = len(plan.lines) + 1
         self.progress.line = self.progress.total_lines = number
         self.report.lines_run.add(number)
-        self._streamed = deque(plan.stream(text))
+        self._streamed = deque(plan.stream(text, detect=self._detect_stream))
+        self.report.dialect = str(plan.dialect)
         await self.stream_rest(plan)
 
     async def stream_rest(self, plan: ProgramPlan) -> None:

@@ -42,6 +42,8 @@ PROGRAM = [
     "G0 X0 Y0",
     "M30",
 ]
+# Then a PlasmaC-form program on the same port: its dialect found from its own lines.
+PLASMAC = ["G21 G90", "G0 X20 Y60", "M3 $0 S1", "G1 X90 Y60 F2500", "M5 $0", "G0 X0 Y0", "M2"]
 BUDGET = 120  # CNCjs's character-counting budget (grbl's 128 less a margin)
 
 
@@ -92,7 +94,9 @@ def stream(
     return answers, "\n".join(said)
 
 
-async def test_a_grbl_sender_cuts_a_masso_program_through_the_port(tmp_path: Path) -> None:
+async def test_a_grbl_sender_cuts_a_masso_then_a_plasmac_program_through_the_port(
+    tmp_path: Path,
+) -> None:
     options = StackOptions(tmp_path, broker="mosquitto", motion="grbl")
     port = tmp_path / "grbl-port"
     async with Stack(options) as stack:
@@ -101,18 +105,18 @@ async def test_a_grbl_sender_cuts_a_masso_program_through_the_port(tmp_path: Pat
             _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
         )
         try:
-            answers, said = await asyncio.to_thread(stream, port, ["$$", *PROGRAM])
+            answers, said = await asyncio.to_thread(stream, port, ["$$", *PROGRAM, *PLASMAC])
         finally:
             proc.terminate()
             await asyncio.to_thread(proc.wait, 10)
             log.close()
         result = await stack.finish()
     summary = summarize(result, options.telemetry_hz)
-    assert answers == ["ok"] * (1 + len(PROGRAM)), (answers, said)
+    assert answers == ["ok"] * (1 + len(PROGRAM) + len(PLASMAC)), (answers, said)
     assert "$110=" in said  # grbl's own settings, relayed as it wrote them
     assert "Grbl 1.1" in said  # the banner, after the reset
     assert "<Idle" in said or "<Run" in said  # ? answered with grbl's own report
-    assert len(summary["cuts"]) == 2
+    assert len(summary["cuts"]) == 3
     assert all(cut["arc_on_s"] > 0 for cut in summary["cuts"])
     assert summary["safety_violations"] == 0, summary["violations"]
     assert summary["torch_on_at_exit"] is False

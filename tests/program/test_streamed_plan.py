@@ -63,3 +63,18 @@ def test_a_streamed_line_reads_what_the_lines_before_it_set() -> None:
 def _line(step: Step) -> str:
     assert isinstance(step, DaemonStep | MotionStep), step
     return step.line
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_streamed_with_detection_a_program_finds_the_dialect_it_is_detected_in_whole(
+    name: str,
+) -> None:
+    """Starting from another dialect, a streamed plan takes the program's own from the
+    first line that shows it; every step after that is the whole plan's."""
+    lines = (PROGRAMS / name).read_text(encoding="utf-8").splitlines()
+    dialect, why = detect_dialect(lines)
+    other = Dialect.ROSETTA if dialect is not Dialect.ROSETTA else Dialect.MASSO
+    plan = ProgramPlan([], other, pins_mm=dict(PINS))
+    for line in lines:
+        plan.stream(line, detect=True)
+    assert plan.dialect is (dialect if why.startswith("found") else other)
