@@ -11,6 +11,8 @@ from typing import Any
 from dthc_tools.grbl_port.session import BANNER, PortSession
 from dthc_tools.sender import Sender
 
+from ..sender.test_sender_lines import FakeBackend
+
 
 class Daemon:
     """Answers every request; an M3 only once ``xy_may_move`` is set."""
@@ -49,36 +51,24 @@ class Daemon:
         pass
 
 
-class Grbl:
+class Grbl(FakeBackend):
+    """The sender tests' backend, with what the port adds: grbl's report, real-time bytes,
+    relayed commands; it counts resets and releases."""
+
     status_line = "<Idle|MPos:0.000,0.000,0.000|FS:0,0>"
 
     def __init__(self) -> None:
-        self.queued: list[str] = []
+        super().__init__()
         self.realtime_bytes: list[int] = []
         self.cleared = 0
         self.relayed: list[str] = []
         self.resumed = 0
-
-    async def queue(self, line: str, *, source_line: int | None = None) -> None:
-        self.queued.append(line)
-
-    def add_motion_listener(self, listener: Callable[[float, str], None]) -> None:
-        pass
-
-    async def wait_idle(self) -> tuple[float, float]:
-        return 0.0, 0.0
-
-    async def hold(self) -> None:
-        pass
 
     async def clear(self) -> None:
         self.cleared += 1
 
     async def resume(self) -> None:
         self.resumed += 1
-
-    async def close(self) -> None:
-        pass
 
     def realtime(self, byte: int) -> None:
         self.realtime_bytes.append(byte)
