@@ -1,29 +1,64 @@
 """BoardClient: the typed async API the plasma controller uses to drive the board.
 
 Units at this level are millimetres, seconds, volts and amperes; the wire's integer units
-stay below it. Telemetry arrives through registered listeners (the THC loop, lowest
-latency), each item with its board time in seconds on the link's continuous timeline, and
-as an async stream (diagnostics, tests).
+stay below it. A SAMPLES batch is converted here, once, into a :class:`Batch` (mm, s, V,
+board time in seconds on the link's continuous timeline): the one place the sample stream's
+wire units are read. Batches and reports arrive through their own registered listeners (the
+THC loop, lowest latency) and as an async stream (diagnostics, tests).
 """
 
 from __future__ import annotations
 
 import asyncio
 from collections import OrderedDict
-from collections.abc import AsyncGenerator, Callable
+from collections.abc import AsyncGenerator, Callable, Sequence
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import firmware_protocol as fp
 
 from .link import BoardTooOld, LinkSupervisor, RequestTimeout
 from .link.session import BoardSession
-from .link.supervisor import ErrorListener, StateListener
+from .link.supervisor import ErrorListener, ReportListener, StateListener
 
-__all__ = ["BoardClient", "Telemetry", "TelemetryListener"]
+__all__ = [
+    "Batch",
+    "BatchListener",
+    "BoardClient",
+    "ReportListener",
+    "Telemetry",
+    "batch_from_wire",
+]
 
-Telemetry = fp.Samples | fp.Report
-# An item and its board time in seconds (SAMPLES: of its last sample).
-TelemetryListener = Callable[[Telemetry, float], None]
+
+@dataclass(frozen=True, slots=True)
+class Batch:
+    """One SAMPLES batch in mm, s and V: what the cut sequence reads from the board."""
+
+    t_s: float  # board time of its last sample (the link's continuous timeline)
+    period_s: float  # between two samples
+    volts: Sequence[float]  # arc voltage, calibrated and filtered by the board, oldest first
+    z_mm: float  # machine Z when the batch was taken
+    xy_speed_mm_s: float | None  # the board's measured XY speed; None: it has no such input
+    duration_s: float  # the time the batch covers: len(volts) periods
+    inputs: int  # raw input levels (fp.InputBit), as the board's pins read them
+    status: int  # board status bits (fp.StatusBit)
+
+
+def batch_from_wire(msg: fp.Samples, t_s: float) -> Batch:
+    """The SAMPLES message in SI units, stamped ``t_s`` (the link's board time of its last
+    sample). Runs once per batch on the hot path: plain arithmetic, one list."""
+    cv = msg.samples_cv
+    return Batch(
+        t_s, msg.period_us / 1e6, [c / 100 for c in cv], msg.z_um / 1000,
+        msg.xy_speed_dmm_s / 10 if msg.xy_speed_dmm_s != fp.XY_SPEED_UNKNOWN else None,
+        len(cv) * msg.period_us / 1e6, msg.inputs, msg.status,
+    )  # fmt: skip
+
+
+# A batch (its own board time inside it).
+BatchListener = Callable[[Batch], None]
+Telemetry = Batch | fp.Report  # what the telemetry() stream yields
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
 PROBE_AWAY_MINOR = 2  # Z_PROBE_AWAY came with protocol 1.2
 
@@ -44,19 +79,38 @@ class BoardClient:
         self.last_status: fp.Status | None = None
         # The status refresh after lost event reports, kept so it is awaited (stop_background).
         self._refresh: asyncio.Task[None] | None = None
+        # The last SAMPLES message converted and its Batch: converted once per batch, by
+        # whichever batch listener the link calls first.
+        self._wire: fp.Samples | None = None
+        self._batch: Batch | None = None
         supervisor.add_report_listener(self._on_report)  # completions to their waiters first
-        supervisor.add_samples_listener(self._to_streams)
-        supervisor.add_report_listener(self._to_streams)
+        self.add_samples_listener(self._batch_to_streams)
+        supervisor.add_report_listener(self._report_to_streams)
         supervisor.add_event_gap_listener(self._on_event_gap)
 
     # --- telemetry -------------------------------------------------------------------------
 
-    def add_listener(self, listener: TelemetryListener) -> None:
-        """Every batch and report, on the hot path, in registration order. Each listener is
-        called (and guarded) by the link on its own: one that raises is reported to the
+    def add_samples_listener(self, listener: BatchListener) -> None:
+        """Every batch, in mm, s and V, on the hot path, in registration order. Each listener
+        is called (and guarded) by the link on its own: one that raises is reported to the
         error listeners (``add_error_listener``) and the others still run."""
-        self.link.add_samples_listener(listener)
+
+        def call(msg: fp.Samples, t_s: float) -> None:
+            listener(self._converted(msg, t_s))
+
+        call.__qualname__ = getattr(listener, "__qualname__", repr(listener))  # its logs' name
+        self.link.add_samples_listener(call)
+
+    def add_report_listener(self, listener: ReportListener) -> None:
+        """EVENT, FAULT, MOTION_DONE and PROBE_RESULT reports with their board time (s), each
+        once, on the hot path; guarded by the link as batch listeners are."""
         self.link.add_report_listener(listener)
+
+    def _converted(self, msg: fp.Samples, t_s: float) -> Batch:
+        if msg is not self._wire or self._batch is None:
+            self._batch = batch_from_wire(msg, t_s)
+            self._wire = msg
+        return self._batch
 
     def add_state_listener(self, listener: StateListener) -> None:
         self.link.add_state_listener(listener)
@@ -70,7 +124,13 @@ class BoardClient:
         """The latest board time seen, in seconds: when a host command takes effect."""
         return self.link.timeline.now_s
 
-    def _to_streams(self, item: Telemetry, _t_s: float) -> None:
+    def _batch_to_streams(self, batch: Batch) -> None:
+        self._to_streams(batch)
+
+    def _report_to_streams(self, report: fp.Report, _t_s: float) -> None:
+        self._to_streams(report)
+
+    def _to_streams(self, item: Telemetry) -> None:
         for queue in self._queues:
             if queue.full():
                 queue.get_nowait()  # the stream keeps the newest; counted as a gap upstream

@@ -117,7 +117,7 @@ def lease_fault(detail: int) -> fp.Fault:
 def test_a_lease_lapsed_at_rest_is_logged_not_a_fault_to_rearm() -> None:
     """The board latched nothing (nothing lit, Z at rest): the daemon does not either."""
     loop = ready()
-    loop.service._on_board(lease_fault(fp.LEASE_DETAIL_IDLE), loop.now)
+    loop.service._on_report(lease_fault(fp.LEASE_DETAIL_IDLE), loop.now)
     assert loop.sequence.state is State.IDLE
     assert not [e for e in loop.events if isinstance(e, BoardFaulted)]
     assert loop.m3().ok  # the next cut runs with no re-arm
@@ -125,10 +125,10 @@ def test_a_lease_lapsed_at_rest_is_logged_not_a_fault_to_rearm() -> None:
 
 def test_a_lease_lost_during_a_cut_or_latched_still_latches() -> None:
     loop = ready()
-    loop.service._on_board(lease_fault(fp.LEASE_DETAIL_LATCHED), loop.now)
+    loop.service._on_report(lease_fault(fp.LEASE_DETAIL_LATCHED), loop.now)
     assert loop.sequence.state is State.FAULTED
     assert loop.sequence.error == "board fault: LEASE_EXPIRED"
     cutting = ready()
     assert cutting.m3().ok
-    cutting.service._on_board(lease_fault(fp.LEASE_DETAIL_IDLE), cutting.now)
+    cutting.service._on_report(lease_fault(fp.LEASE_DETAIL_IDLE), cutting.now)
     assert cutting.sequence.state is State.FAULTED  # busy: never taken for an idle lapse
