@@ -1,9 +1,11 @@
 """BoardClient: the typed async API the plasma controller uses to drive the board.
 
 Units at this level are millimetres, seconds, volts and amperes; the wire's integer units
-stay below it. A SAMPLES batch is converted here, once, into a :class:`Batch` (mm, s, V,
-board time in seconds on the link's continuous timeline): the one place the sample stream's
-wire units are read. Batches and reports arrive through their own registered listeners (the
+stay below it. What the board sends is converted here, into typed values in those units
+with board time in seconds on the link's continuous timeline: a SAMPLES batch into a
+:class:`Batch` (once per batch), an EVENT into an :class:`InputChange`, a FAULT into a
+:class:`FaultReport`, a move's and a probe's completion into :class:`MoveEnded` and
+:class:`ProbeEnded`. Batches and reports arrive through their own registered listeners (the
 THC loop, lowest latency) and as an async stream (diagnostics, tests).
 """
 
@@ -19,12 +21,17 @@ import firmware_protocol as fp
 
 from .link import BoardTooOld, LinkSupervisor, RequestTimeout
 from .link.session import BoardSession
-from .link.supervisor import ErrorListener, ReportListener, StateListener
+from .link.supervisor import ErrorListener, StateListener
 
 __all__ = [
     "Batch",
     "BatchListener",
     "BoardClient",
+    "BoardReport",
+    "FaultReport",
+    "InputChange",
+    "MoveEnded",
+    "ProbeEnded",
     "ReportListener",
     "Telemetry",
     "batch_from_wire",
@@ -56,10 +63,80 @@ def batch_from_wire(msg: fp.Samples, t_s: float) -> Batch:
     )  # fmt: skip
 
 
-# A batch (its own board time inside it).
+@dataclass(frozen=True, slots=True)
+class InputChange:
+    """An EVENT: one input changed level."""
+
+    t_s: float  # board time of the change
+    input: int  # the fp.InputBit that changed
+    level: bool
+    inputs: int  # every input's level after the change
+    z_mm: float
+
+
+@dataclass(frozen=True, slots=True)
+class FaultReport:
+    """A FAULT the board latched (or, ``idle_lapse``, a lease that ran out at rest)."""
+
+    t_s: float
+    code: int  # fp.FaultCode
+    detail: int
+    faults: int  # the whole latched set, bit 1 << fp.FaultCode
+    z_mm: float
+
+    @property
+    def idle_lapse(self) -> bool:
+        """The lease ran out while the board was at rest: it latched nothing."""
+        return self.code == fp.FaultCode.LEASE_EXPIRED and self.detail == fp.LEASE_DETAIL_IDLE
+
+
+@dataclass(frozen=True, slots=True)
+class MoveEnded:
+    """MOTION_DONE: how a Z move ended."""
+
+    result: int  # fp.MotionResult
+    z_mm: float
+
+    @property
+    def reached(self) -> bool:
+        return self.result == fp.MotionResult.REACHED
+
+
+@dataclass(frozen=True, slots=True)
+class ProbeEnded:
+    """PROBE_RESULT: how a probe ended (``contact_z_mm``: Z at contact, or at release for
+    a probe away; else where it stopped)."""
+
+    result: int  # fp.ProbeOutcome
+    sensor: int  # the input bits that ended it
+    contact_z_mm: float
+    stop_z_mm: float
+
+
+BoardReport = InputChange | FaultReport
+# A batch (its own board time inside it); a report (likewise).
 BatchListener = Callable[[Batch], None]
-Telemetry = Batch | fp.Report  # what the telemetry() stream yields
+ReportListener = Callable[[BoardReport], None]
+Telemetry = Batch | BoardReport  # what the telemetry() stream yields
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
+
+
+def _report_from_wire(msg: fp.Report, t_s: float) -> BoardReport | None:
+    if isinstance(msg, fp.Event):
+        return InputChange(t_s, msg.input, bool(msg.level), msg.inputs, msg.z_um / 1000)
+    if isinstance(msg, fp.Fault):
+        return FaultReport(t_s, msg.code, msg.detail, msg.faults, msg.z_um / 1000)
+    return None  # a completion: to its waiter (wait_move, wait_probe)
+
+
+def _move_ended(msg: fp.MotionDone) -> MoveEnded:
+    return MoveEnded(msg.result, msg.z_um / 1000)
+
+
+def _probe_ended(msg: fp.ProbeResult) -> ProbeEnded:
+    return ProbeEnded(msg.result, msg.sensor, msg.contact_z_um / 1000, msg.stop_z_um / 1000)
+
+
 PROBE_AWAY_MINOR = 2  # Z_PROBE_AWAY came with protocol 1.2
 
 
@@ -84,8 +161,8 @@ class BoardClient:
         self._wire: fp.Samples | None = None
         self._batch: Batch | None = None
         supervisor.add_report_listener(self._on_report)  # completions to their waiters first
-        self.add_samples_listener(self._batch_to_streams)
-        supervisor.add_report_listener(self._report_to_streams)
+        self.add_samples_listener(self._to_streams)
+        self.add_report_listener(self._to_streams)
         supervisor.add_event_gap_listener(self._on_event_gap)
 
     # --- telemetry -------------------------------------------------------------------------
@@ -102,9 +179,23 @@ class BoardClient:
         self.link.add_samples_listener(call)
 
     def add_report_listener(self, listener: ReportListener) -> None:
-        """EVENT, FAULT, MOTION_DONE and PROBE_RESULT reports with their board time (s), each
-        once, on the hot path; guarded by the link as batch listeners are."""
-        self.link.add_report_listener(listener)
+        """Input changes (EVENT) and faults (FAULT), each once, in mm and s, on the hot path;
+        guarded by the link as batch listeners are. A move's or a probe's completion goes to
+        whoever waits for it (``wait_move``, ``wait_probe``)."""
+
+        def call(msg: fp.Report, t_s: float) -> None:
+            report = _report_from_wire(msg, t_s)
+            if report is not None:
+                listener(report)
+
+        call.__qualname__ = getattr(listener, "__qualname__", repr(listener))  # its logs' name
+        self.link.add_report_listener(call)
+
+    def z_range_mm(self) -> tuple[float, float] | None:
+        """The board's Z travel (min, max) as its HELLO_INFO says, or None before one."""
+        session = self.link.session
+        info = None if session is None else session.info
+        return None if info is None else (info.z_min_um / 1000, info.z_max_um / 1000)
 
     def _converted(self, msg: fp.Samples, t_s: float) -> Batch:
         if msg is not self._wire or self._batch is None:
@@ -123,12 +214,6 @@ class BoardClient:
     def board_time_s(self) -> float:
         """The latest board time seen, in seconds: when a host command takes effect."""
         return self.link.timeline.now_s
-
-    def _batch_to_streams(self, batch: Batch) -> None:
-        self._to_streams(batch)
-
-    def _report_to_streams(self, report: fp.Report, _t_s: float) -> None:
-        self._to_streams(report)
 
     def _to_streams(self, item: Telemetry) -> None:
         for queue in self._queues:
@@ -232,10 +317,10 @@ class BoardClient:
 
     async def move_z(
         self, target_mm: float, feed_mm_s: float, timeout_s: float = 10.0
-    ) -> fp.MotionDone:
+    ) -> MoveEnded:
         """Move Z and wait for the board to report the move ended."""
         seq = await self.start_move_z(target_mm, feed_mm_s)
-        return await self.wait_report(fp.MotionDone, seq, timeout_s)
+        return await self.wait_move(seq, timeout_s)
 
     async def start_move_z(self, target_mm: float, feed_mm_s: float) -> int:
         """Start a Z move; returns its seq once the board accepted it (ACK)."""
@@ -250,11 +335,11 @@ class BoardClient:
         timeout_s: float = 20.0,
         *,
         away: bool = False,
-    ) -> fp.ProbeResult:
+    ) -> ProbeEnded:
         """Probe down; the board stops on contact by itself and reports where (``away``:
         up, stopped when every sensor is released; PROBE_RESULT RELEASED or NO_RELEASE)."""
         seq = await self.start_probe(feed_mm_s, max_travel_mm, sensors, away=away)
-        return await self.wait_report(fp.ProbeResult, seq, timeout_s)
+        return await self.wait_probe(seq, timeout_s)
 
     async def start_probe(
         self, feed_mm_s: float, max_travel_mm: float, sensors: int, *, away: bool = False
@@ -279,7 +364,15 @@ class BoardClient:
         ack = await session.request(command)
         return ack.seq
 
-    async def wait_report(self, report: type[_Report], seq: int, timeout_s: float) -> _Report:
+    async def wait_move(self, seq: int, timeout_s: float) -> MoveEnded:
+        """Wait for the Z move ``seq`` (``start_move_z``) to end."""
+        return _move_ended(await self._wait_report(fp.MotionDone, seq, timeout_s))
+
+    async def wait_probe(self, seq: int, timeout_s: float) -> ProbeEnded:
+        """Wait for the probe ``seq`` (``start_probe``) to end."""
+        return _probe_ended(await self._wait_report(fp.ProbeResult, seq, timeout_s))
+
+    async def _wait_report(self, report: type[_Report], seq: int, timeout_s: float) -> _Report:
         """Wait for the completion report of the command ``seq`` (MOTION_DONE/PROBE_RESULT)."""
         session = self._session()
         key = (report, seq)  # the completion carries the seq of the command it ends

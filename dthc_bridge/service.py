@@ -24,7 +24,7 @@ import structlog
 
 import firmware_protocol as fp
 
-from .board import Batch, BoardClient
+from .board import Batch, BoardClient, BoardReport, InputChange
 from .consumables import ConsumableLog
 from .controller import actions as act
 from .controller.commands import Abort, Command, CommandError, CycleStart, ProbeTest, ThcHold
@@ -477,27 +477,25 @@ class ControllerService:
 
     async def _await_move(self, seq: int, token: int) -> None:
         try:
-            done = await self.client.wait_report(fp.MotionDone, seq, self.command_timeout_s)
+            done = await self.client.wait_move(seq, self.command_timeout_s)
         except LinkError as exc:
             self.sequence.on_action_failed(act.MoveZ(0, 0, token), str(exc))
         else:
-            self.sequence.on_motion_done(
-                token, done.result == fp.MotionResult.REACHED, done.z_um / 1000
-            )
+            self.sequence.on_motion_done(token, done.reached, done.z_mm)
         self.pump()
 
     async def _await_probe(self, seq: int, away: bool = False) -> None:
         """The probe's outcome to the sequence: ``contact`` is the probe's goal reached,
         contact (down) or every sensor released (away), at ``contact_z`` (the release's Z)."""
         try:
-            done = await self.client.wait_report(fp.ProbeResult, seq, self.command_timeout_s)
+            done = await self.client.wait_probe(seq, self.command_timeout_s)
         except LinkError as exc:
             self.sequence.on_action_failed(act.ProbeZ(0, 0, False, False, away), str(exc))
         else:
             goal = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
             self.sequence.on_probe_done(
                 done.result == goal, bool(done.sensor & fp.InputMask.OHMIC),
-                done.contact_z_um / 1000, done.stop_z_um / 1000,
+                done.contact_z_mm, done.stop_z_mm,
             )  # fmt: skip
         self.pump()
 
@@ -516,19 +514,20 @@ class ControllerService:
         self._count_consumables(batch)
         self.pump()
 
-    def _on_report(self, item: fp.Report, t_s: float) -> None:
+    def _on_report(self, report: BoardReport) -> None:
         sequence = self.sequence
-        if isinstance(item, fp.Event):
-            sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
-        elif isinstance(item, fp.Fault):
-            name = _fault_name(item.code)
-            if _idle_lapse(item) and not sequence.busy:
+        t_s = report.t_s
+        if isinstance(report, InputChange):
+            sequence.on_inputs(report.inputs, report.z_mm, t_s)  # never behind (timeline)
+        else:
+            name = _fault_name(report.code)
+            if report.idle_lapse and not sequence.busy:
                 # The lease ran out with nothing lit and Z at rest (a CPU spike, a stalled
                 # link): the board latched nothing and goes on with the next frame, as the
                 # daemon does: logged, not a fault to re-arm.
                 log.warning("lease_lapsed_idle", t=round(t_s, 3))
             else:
-                self._publish_event(BoardFaulted(t_s, name, item.faults))
+                self._publish_event(BoardFaulted(t_s, name, report.faults))
                 sequence.on_board_fault(name)
         self.pump()
 
@@ -580,11 +579,9 @@ class ControllerService:
             self._publish_event(BoardRestarted(self.now))
         if state is LinkState.ONLINE:
             session = self.supervisor.session
-            if session is not None and session.info is not None:
-                info = session.info
-                self.sequence.config = with_board_limits(
-                    self.sequence.config, info.z_min_um / 1000, info.z_max_um / 1000
-                )
+            z_range = self.client.z_range_mm()
+            if z_range is not None:
+                self.sequence.config = with_board_limits(self.sequence.config, *z_range)
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
             status = session.initial_status if session is not None else None
@@ -634,11 +631,6 @@ def feed_samples(
         xy = host_speed_mm_s
     sequence.on_samples(batch.volts, batch.period_s, z_mm, xy, requested_feed_mm_s, t_s)
     return xy
-
-
-def _idle_lapse(fault: fp.Fault) -> bool:
-    """The board's report of a lease that ran out while it was at rest: not latched."""
-    return fault.code == fp.FaultCode.LEASE_EXPIRED and fault.detail == fp.LEASE_DETAIL_IDLE
 
 
 def _fault_names(faults: int) -> str:

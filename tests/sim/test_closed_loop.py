@@ -108,7 +108,7 @@ def test_a_reboot_no_reply_has_shown_ends_the_cut_at_once() -> None:
     loop.run_until(lambda: False, 1.0)
     times: list[float] = []
     loop.client.add_samples_listener(lambda _batch: times.append(loop.sequence.now))
-    loop.client.add_report_listener(lambda _report, _t: times.append(loop.sequence.now))
+    loop.client.add_report_listener(lambda _report: times.append(loop.sequence.now))
     loop.board.reboot()
     assert loop.run_until(lambda: loop.sequence.state is State.FAULTED, 0.02)
     assert any(isinstance(e, BoardRestarted) for e in loop.events)
