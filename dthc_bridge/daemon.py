@@ -20,20 +20,28 @@ import structlog
 import firmware_protocol as fp
 
 from .board import BoardClient
-from .config import ControllerConfigs, ControllerSettings, DaemonConfig
+from .config import BoardSettings, ControllerConfigs, ControllerSettings, DaemonConfig
 from .consumables import ConsumableLog, default_consumables_file
 from .controller.dialect import Dialect
 from .controller.plasma import PlasmaController, default_material
 from .controller.sequence import CutSequence
 from .controller.thc import ThcController
 from .deploy.sdnotify import SdNotifier
-from .link import LinkSupervisor
+from .link import LinkSupervisor, SessionTrace
 from .materials import MaterialStore
 from .mqtt.broker import BrokerRefused
 from .mqtt.gateway import MqttGateway
 from .service import ControllerService
+from .transport import TransportOpener
 
-__all__ = ["build_controller", "build_service", "controller_service", "run_daemon"]
+__all__ = [
+    "board_link",
+    "board_setup",
+    "build_controller",
+    "build_service",
+    "controller_service",
+    "run_daemon",
+]
 
 log = structlog.get_logger("dthc_bridge.daemon")
 
@@ -77,11 +85,25 @@ def controller_service(
     )  # fmt: skip
 
 
-def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
-    """The board link and the controller service, wired as the configuration says."""
-    board = config.board
-    supervisor = LinkSupervisor(board.link, board.timing(), baudrate=board.baudrate)
-    client = BoardClient(supervisor)
+def board_link(
+    board: BoardSettings,
+    *,
+    opener: TransportOpener | None = None,
+    session_trace: SessionTrace | None = None,
+) -> tuple[LinkSupervisor, BoardClient]:
+    """The board link and its client, as ``[board]`` says. ``opener`` and ``session_trace``
+    are a tool's (the latency bench opens its own transport and traces the hot path); the
+    daemon gives neither."""
+    supervisor = LinkSupervisor(
+        board.link, board.timing(), baudrate=board.baudrate, opener=opener,
+        session_trace=session_trace,
+    )  # fmt: skip
+    return supervisor, BoardClient(supervisor)
+
+
+def board_setup(board: BoardSettings) -> Callable[[BoardClient], Awaitable[None]]:
+    """What the service does with the board each time it comes online: configure its
+    sampling and filter as ``[board]`` says."""
 
     async def setup(client: BoardClient) -> None:
         await client.configure(
@@ -94,9 +116,15 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
             cal_scale=board.cal_scale,
         )
 
+    return setup
+
+
+def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerService]:
+    """The board link and the controller service, wired as the configuration says."""
+    supervisor, client = board_link(config.board)
     settings = config.controller
     service = controller_service(
-        settings, supervisor, client, board_setup=setup,
+        settings, supervisor, client, board_setup=board_setup(config.board),
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
         consumables=ConsumableLog(settings.consumables_file or default_consumables_file()),

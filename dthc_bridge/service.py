@@ -24,7 +24,7 @@ import structlog
 
 import firmware_protocol as fp
 
-from .board import BoardClient, Telemetry
+from .board import Batch, BoardClient, BoardReport, InputChange
 from .consumables import ConsumableLog
 from .controller import actions as act
 from .controller.commands import Abort, Command, CommandError, CycleStart, ProbeTest, ThcHold
@@ -115,7 +115,8 @@ class ControllerService:
         self._torch_off_sent_s = -math.inf
         # Published as a ``sequence`` event whenever it changes.
         self._state_seen = controller.sequence.state
-        client.add_listener(self._on_board)
+        client.add_samples_listener(self._on_batch)
+        client.add_report_listener(self._on_report)
         client.add_state_listener(self._on_link_state)
         client.add_error_listener(self._on_handler_error)
 
@@ -472,59 +473,61 @@ class ControllerService:
 
     async def _await_move(self, seq: int, token: int) -> None:
         try:
-            done = await self.client.wait_report(fp.MotionDone, seq, self.command_timeout_s)
+            done = await self.client.wait_move(seq, self.command_timeout_s)
         except LinkError as exc:
             self.sequence.on_action_failed(act.MoveZ(0, 0, token), str(exc))
         else:
-            self.sequence.on_motion_done(
-                token, done.result == fp.MotionResult.REACHED, done.z_um / 1000
-            )
+            self.sequence.on_motion_done(token, done.reached, done.z_mm)
         self.pump()
 
     async def _await_probe(self, seq: int, away: bool = False) -> None:
         """The probe's outcome to the sequence: ``contact`` is the probe's goal reached,
         contact (down) or every sensor released (away), at ``contact_z`` (the release's Z)."""
         try:
-            done = await self.client.wait_report(fp.ProbeResult, seq, self.command_timeout_s)
+            done = await self.client.wait_probe(seq, self.command_timeout_s)
         except LinkError as exc:
             self.sequence.on_action_failed(act.ProbeZ(0, 0, False, away), str(exc))
         else:
             goal = fp.ProbeOutcome.RELEASED if away else fp.ProbeOutcome.CONTACT
             self.sequence.on_probe_done(
                 done.result == goal, bool(done.sensor & fp.InputMask.OHMIC),
-                done.contact_z_um / 1000, done.stop_z_um / 1000,
+                done.contact_z_mm, done.stop_z_mm,
             )  # fmt: skip
         self.pump()
 
     # --- board events ----------------------------------------------------------------------
 
-    def _on_board(self, item: Telemetry, t_s: float) -> None:
+    def _on_batch(self, batch: Batch) -> None:
+        """A SAMPLES batch, in SI units (the board client converted it): the hot path."""
+        t_s = batch.t_s
+        self._board_has_xy = self._board_has_xy or batch.xy_speed_mm_s is not None
+        host_speed = self._host_speed_now(t_s)
+        xy = feed_samples(self.sequence, batch, self._requested_feed_mm_s, host_speed)
+        # Only what the batch brought is kept here; telemetry() builds the point at the MQTT
+        # rate, not at the sample rate.
+        self._last_batch = (t_s, batch.z_mm, xy)
+        self._last_io = (batch.inputs, batch.status)
+        self._count_consumables(batch)
+        self.pump()
+
+    def _on_report(self, report: BoardReport) -> None:
         sequence = self.sequence
-        if isinstance(item, fp.Samples):
-            self._board_has_xy = self._board_has_xy or item.has_xy_speed
-            z_mm, xy = feed_samples(
-                sequence, item, t_s, self._requested_feed_mm_s, self._host_speed_now(t_s)
-            )
-            # Only what the batch brought is kept here; telemetry() builds the point at the
-            # MQTT rate, not at the sample rate.
-            self._last_batch = (t_s, z_mm, xy)
-            self._last_io = (item.inputs, item.status)
-            self._count_consumables(item)
-        elif isinstance(item, fp.Event):
-            sequence.on_inputs(item.inputs, item.z_um / 1000, t_s)  # never behind (timeline)
-        elif isinstance(item, fp.Fault):
-            name = _fault_name(item.code)
-            if _idle_lapse(item) and not sequence.busy:
+        t_s = report.t_s
+        if isinstance(report, InputChange):
+            sequence.on_inputs(report.inputs, report.z_mm, t_s)  # never behind (timeline)
+        else:
+            name = _fault_name(report.code)
+            if report.idle_lapse and not sequence.busy:
                 # The lease ran out with nothing lit and Z at rest (a CPU spike, a stalled
                 # link): the board latched nothing and goes on with the next frame, as the
                 # daemon does: logged, not a fault to re-arm.
                 log.warning("lease_lapsed_idle", t=round(t_s, 3))
             else:
-                self._publish_event(BoardFaulted(t_s, name, item.faults))
+                self._publish_event(BoardFaulted(t_s, name, report.faults))
                 sequence.on_board_fault(name)
         self.pump()
 
-    def _count_consumables(self, batch: fp.Samples) -> None:
+    def _count_consumables(self, batch: Batch) -> None:
         """A pierce per arc transfer; arc-on time while the relay is on and Arc OK reads;
         saved (in a thread: the hot path never waits for a disk) when the arc goes out."""
         counters = self.consumables
@@ -533,7 +536,7 @@ class ControllerService:
             counters.pierced()
         burning = bool(batch.status & fp.StatusBit.TORCH_ON and batch.inputs & fp.InputMask.ARC_OK)
         if burning:
-            counters.burned(len(batch.samples_cv) * batch.period_us / 1e6)
+            counters.burned(batch.duration_s)
         elif self._burning:
             content = counters.pending()
             if content is not None:
@@ -572,11 +575,9 @@ class ControllerService:
             self._publish_event(BoardRestarted(self.now))
         if state is LinkState.ONLINE:
             session = self.supervisor.session
-            if session is not None and session.info is not None:
-                info = session.info
-                self.sequence.config = with_board_limits(
-                    self.sequence.config, info.z_min_um / 1000, info.z_max_um / 1000
-                )
+            z_range = self.client.z_range_mm()
+            if z_range is not None:
+                self.sequence.config = with_board_limits(self.sequence.config, *z_range)
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
             status = session.initial_status if session is not None else None
@@ -612,25 +613,20 @@ class ControllerService:
 
 def feed_samples(
     sequence: CutSequence,
-    batch: fp.Samples,
-    t_s: float,
+    batch: Batch,
     requested_feed_mm_s: float | None,
     host_speed_mm_s: float | None = None,
-) -> tuple[float, float | None]:
-    """One SAMPLES batch into the cut sequence, in its units, at ``t_s``: the board time
-    of its last sample (the link's stamp). The board's XY speed when it has the input, else
-    the sender's (``host_speed_mm_s``). Returns (Z mm, XY speed mm/s or None)."""
-    z_mm = batch.z_um / 1000
+) -> float | None:
+    """One batch into the cut sequence at its board time (that of its last sample). The
+    board's XY speed when it has the input, else the sender's (``host_speed_mm_s``).
+    Returns the XY speed used (mm/s, or None)."""
+    t_s, z_mm = batch.t_s, batch.z_mm
     sequence.on_inputs(batch.inputs, z_mm, t_s)
-    xy = batch.xy_speed_dmm_s / 10 if batch.has_xy_speed else host_speed_mm_s
-    volts = [cv / 100 for cv in batch.samples_cv]
-    sequence.on_samples(volts, batch.period_us / 1e6, z_mm, xy, requested_feed_mm_s, t_s)
-    return z_mm, xy
-
-
-def _idle_lapse(fault: fp.Fault) -> bool:
-    """The board's report of a lease that ran out while it was at rest: not latched."""
-    return fault.code == fp.FaultCode.LEASE_EXPIRED and fault.detail == fp.LEASE_DETAIL_IDLE
+    xy = batch.xy_speed_mm_s
+    if xy is None:
+        xy = host_speed_mm_s
+    sequence.on_samples(batch.volts, batch.period_s, z_mm, xy, requested_feed_mm_s, t_s)
+    return xy
 
 
 def _fault_names(faults: int) -> str:

@@ -62,7 +62,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "deploy": ("__init__", "mqtt.roles", "mqtt.settings", "mqtt.topics"),
     "daemon": (
         "board", "config", "consumables", "controller", "deploy.sdnotify", "link",
-        "materials", "mqtt", "service", "fp",
+        "materials", "mqtt", "service", "transport", "fp",
     ),
     "cli": (
         "config", "config_paths", "daemon", "deploy.install", "logs", "program",

@@ -12,7 +12,7 @@ from .errors import (
     ProtocolVersionMismatch,
     RequestTimeout,
 )
-from .session import BoardSession
+from .session import BoardSession, SessionTrace
 from .stats import LinkStats
 from .supervisor import LinkState, LinkStateChange, LinkSupervisor
 from .timing import LinkTiming
@@ -33,5 +33,6 @@ __all__ = [
     "NegativeAck",
     "ProtocolVersionMismatch",
     "RequestTimeout",
+    "SessionTrace",
     "extend_u32",
 ]

@@ -13,6 +13,7 @@ import asyncio
 import random
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import structlog
 
@@ -32,13 +33,30 @@ from .frametrace import new_frame_trace
 from .stats import LinkStats
 from .timing import LinkTiming
 
-__all__ = ["BoardSession", "ReportCallback", "SamplesCallback"]
+__all__ = ["BoardSession", "ReportCallback", "SamplesCallback", "SessionTrace"]
 
 log = structlog.get_logger("dthc_bridge.link")
 
 SamplesCallback = Callable[[fp.Samples, int], None]  # batch, 64-bit board time of its last sample
 # EVENT, FAULT, MOTION_DONE or PROBE_RESULT, and its 64-bit board time
 ReportCallback = Callable[[fp.Report, int], None]
+
+
+class SessionTrace(Protocol):
+    """Hooks a measuring tool gives the link (the latency bench), called on the hot path:
+    which wire batch is being handled, and each Z velocity written meanwhile. The daemon
+    gives none."""
+
+    def samples_received(self, batch: fp.Samples, t_us: int) -> None:
+        """A SAMPLES batch (``t_us``: its last sample's 64-bit board time), before the
+        layers above handle it."""
+
+    def samples_handled(self, batch: fp.Samples) -> None:
+        """The layers above are done with ``batch``."""
+
+    def velocity_sent(self, velocity_seq: int) -> None:
+        """A Z_VELOCITY frame (its stream seq) was written to the transport."""
+
 
 _REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
 _REPORT_REPLY = {fp.QueryWhat.PROBE_RESULT: fp.ProbeResult, fp.QueryWhat.MOTION_DONE: fp.MotionDone}
@@ -62,6 +80,7 @@ class BoardSession:
         on_samples: SamplesCallback | None = None,
         on_report: ReportCallback | None = None,
         on_event_gap: Callable[[int], None] | None = None,
+        trace: SessionTrace | None = None,
     ) -> None:
         self.url = url
         self.timing = timing
@@ -89,6 +108,7 @@ class BoardSession:
         self._last_event_counter: int | None = None
         self.lost: asyncio.Future[LinkError] = self._loop.create_future()
         self._trace = new_frame_trace()  # None unless the trace switch is on
+        self._hooks = trace  # a measuring tool's (SessionTrace); None in the daemon
 
     # --- lifetime --------------------------------------------------------------------------
 
@@ -213,6 +233,8 @@ class BoardSession:
         expiry = self.timing.velocity_expiry_ms if expiry_ms is None else expiry_ms
         self._write(fp.encode(fp.ZVelocity(0, self._velocity_seq, velocity_um_s, expiry)))
         self.stats.velocity_frames += 1
+        if self._hooks is not None:
+            self._hooks.velocity_sent(self._velocity_seq)
 
     @property
     def velocity_seq(self) -> int:
@@ -316,8 +338,13 @@ class BoardSession:
             self.fail(BoardRebooted(self.boot_id, None))
             return
         self._last_sample_t_us = t_us
+        hooks = self._hooks
+        if hooks is not None:
+            hooks.samples_received(batch, t_us)
         if self.on_samples is not None:
             self.on_samples(batch, t_us)
+        if hooks is not None:
+            hooks.samples_handled(batch)
 
     def _check_boot_id(self, boot_id: int) -> bool:
         if self.boot_id is not None and boot_id != self.boot_id:

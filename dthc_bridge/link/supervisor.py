@@ -35,7 +35,7 @@ from ..backoff import backoff_delay_s
 from ..transport import LinkUnavailable, TransportError, TransportOpener, open_transport
 from .clock import BoardTimeline
 from .errors import BoardRebooted, LinkDown, LinkError, ProtocolVersionMismatch
-from .session import BoardSession
+from .session import BoardSession, SessionTrace
 from .stats import LinkStats
 from .timing import LinkTiming
 
@@ -85,7 +85,10 @@ class LinkSupervisor:
         baudrate: int = 921_600,
         opener: TransportOpener | None = None,
         rng: random.Random | None = None,
+        session_trace: SessionTrace | None = None,
     ) -> None:
+        """``session_trace``: hooks every session calls on the hot path (a measuring tool's;
+        the daemon gives none)."""
         self.url = url
         self.timing = timing or LinkTiming()
         self.stats = LinkStats()
@@ -99,6 +102,7 @@ class LinkSupervisor:
         self._state_listeners: list[StateListener] = []
         self._error_listeners: list[ErrorListener] = []
         self.rng = rng or random.Random()
+        self._session_trace = session_trace
         self._handler_error_logged_s = -math.inf
         self._handler_errors_unlogged = 0
         self._last_boot_id: int | None = None
@@ -208,7 +212,7 @@ class LinkSupervisor:
         session = BoardSession(
             self.url, self.timing, self.stats,
             on_samples=self._on_samples, on_report=self._on_report,
-            on_event_gap=self._on_event_gap,
+            on_event_gap=self._on_event_gap, trace=self._session_trace,
         )  # fmt: skip
         try:
             await session.open(self._opener)

@@ -1,9 +1,12 @@
 """``bench latency``: the daemon's hot path, in this process and end to end over a pty.
 
-Both parts build the daemon's real receive path: transport callback -> BoardSession
-(StreamDecoder) -> BoardClient listener -> ControllerService._on_board ->
-CutSequence.on_samples -> ThcController -> ZVelocity -> BoardSession.send_velocity ->
-transport write. A cut is started the way a sender does it (``T112 M6``, ``G200 ...``,
+Both parts build the daemon's real receive path, through the daemon's own builders
+(``daemon.board_link``, ``board_setup``, ``controller_service``): transport callback ->
+BoardSession (StreamDecoder) -> BoardClient (the batch in SI units) ->
+ControllerService._on_batch -> CutSequence.on_samples -> ThcController -> ZVelocity ->
+BoardSession.send_velocity -> transport write. The bench watches it through the session's
+trace hooks (:class:`LatencyTrace`), not by wiring listeners of its own around the
+service's. A cut is started the way a sender does it (``T112 M6``, ``G200 ...``,
 ``M667 F3000``, the cut's ``G1 ... F5500`` for the requested feed, ``M3`` through
 ``ControllerService.execute_gcode``); measuring starts once the THC has its target and no
 lock (XY at 100 % of the requested feed).
@@ -65,18 +68,20 @@ import sys
 import tempfile
 import time
 from collections import Counter
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import firmware_protocol as fp
-from dthc_bridge.board import BoardClient, Telemetry
-from dthc_bridge.controller.plasma import PlasmaController
+from dthc_bridge.board import BoardClient
+from dthc_bridge.config import BoardSettings, ControllerSettings
+from dthc_bridge.consumables import ConsumableLog
 from dthc_bridge.controller.sequence import CutSequence, State
-from dthc_bridge.controller.thc import ThcController
-from dthc_bridge.link import LinkError, LinkSupervisor, LinkTiming, extend_u32
+from dthc_bridge.daemon import board_link, board_setup, controller_service
+from dthc_bridge.link import BoardSession, LinkError, LinkSupervisor, extend_u32
+from dthc_bridge.mqtt.settings import MqttSettings
 from dthc_bridge.service import ControllerService
-from dthc_bridge.transport import Transport, open_transport
+from dthc_bridge.transport import Transport, TransportOpener, open_transport
 from dthc_bridge.transport.base import BytesCallback, LostCallback
 from dthc_tools.sim.link import SimulatedLink
 from mock_device.latency_log import read_latency_log
@@ -88,7 +93,7 @@ from .report import Goal, goals_block, percentiles, proc_cpu_s
 
 __all__ = [
     "BoardE2e",
-    "TimedClient",
+    "LatencyTrace",
     "add_arguments",
     "log_records",
     "match_board_e2e",
@@ -105,16 +110,12 @@ RTT_PROBE_PERIOD_S = 0.02
 MATCH_WINDOW_US = 1_000_000  # a Z_VELOCITY stream seq repeats after >= 65 s at 1 kHz
 
 
-class TimedClient(BoardClient):
-    """BoardClient that notes which batch each Z_VELOCITY answers, and when it left.
+class LatencyTrace:
+    """The session's trace hooks (``SessionTrace``): which batch each Z_VELOCITY answers,
+    and when it left. A Z_VELOCITY written while a batch is being handled answers that
+    batch."""
 
-    Listener order: ``_mark`` (registered here, before the service's), the service's
-    ``_on_board``, then ``_unmark`` (``finish_wiring``, after the service is built). A
-    Z_VELOCITY sent while a batch is being handled answers that batch.
-    """
-
-    def __init__(self, supervisor: LinkSupervisor) -> None:
-        super().__init__(supervisor)
+    def __init__(self) -> None:
         self.chunk_ns = 0  # set by the byte source just before the session decodes
         self.recording = False
         self._batch: fp.Samples | None = None
@@ -123,40 +124,38 @@ class TimedClient(BoardClient):
         self.batches: list[tuple[int, int, int, int]] = []
         # (chunk_ns, out_ns, velocity_seq, batch index) per answer while recording
         self.answers: list[tuple[int, int, int, int]] = []
-        self.last_batch: fp.Samples | None = None
-        self.add_listener(self._mark)
+        self.last_batch: fp.Samples | None = None  # as it came off the wire
+        self.configured_batch: tuple[int, int] | None = None  # (samples, period_us) to wait for
+        self.configured = asyncio.Event()  # a batch of that shape arrived
+        self.waiting = True  # for that batch
 
-    def finish_wiring(self) -> None:
-        self.add_listener(self._unmark)
+    def samples_received(self, batch: fp.Samples, t_us: int) -> None:
+        self._batch = batch
+        self.last_batch = batch
+        if self.waiting and (len(batch.samples_cv), batch.period_us) == self.configured_batch:
+            self.waiting = False
+            self.configured.set()
+        if self.recording:
+            self._t_last_us = extend_u32(batch.t_last_us, self._t_last_us)
+            self.batches.append(
+                (batch.stream_seq, self._t_last_us, batch.zvel_seq, len(batch.samples_cv))
+            )
 
-    def _mark(self, item: Telemetry, t_s: float) -> None:
-        if type(item) is fp.Samples:
-            self._batch = item
-            self.last_batch = item
-            if self.recording:
-                self._t_last_us = extend_u32(item.t_last_us, self._t_last_us)
-                self.batches.append(
-                    (item.stream_seq, self._t_last_us, item.zvel_seq, len(item.samples_cv))
-                )
-
-    def _unmark(self, item: Telemetry, t_s: float) -> None:
+    def samples_handled(self, batch: fp.Samples) -> None:
         self._batch = None
 
-    def z_velocity(self, velocity_mm_s: float, expiry_ms: int | None = None) -> None:
-        super().z_velocity(velocity_mm_s, expiry_ms)
+    def velocity_sent(self, velocity_seq: int) -> None:
         if self.recording and self._batch is not None:
             out = time.perf_counter_ns()
-            session = self.link.session
-            seq = session.velocity_seq if session is not None else -1
-            self.answers.append((self.chunk_ns, out, seq, len(self.batches) - 1))
+            self.answers.append((self.chunk_ns, out, velocity_seq, len(self.batches) - 1))
 
 
 @dataclass
 class Rig:
     supervisor: LinkSupervisor
-    client: TimedClient
+    client: BoardClient
     service: ControllerService
-    configured: asyncio.Event
+    trace: LatencyTrace
     tasks: list[asyncio.Task[None]] = field(default_factory=list)
 
     @property
@@ -182,31 +181,36 @@ class Rig:
             await session.close()
 
 
+SessionOf = Callable[[], BoardSession | None]
+
+
 def build_rig(
     url: str,
-    opener_factory: Callable[[TimedClient], Callable[..., Awaitable[Transport]]],
+    opener_factory: Callable[[LatencyTrace, SessionOf], TransportOpener],
     batch_size: int,
 ) -> Rig:
-    """The daemon's link and controller, wired as ``daemon.build_service`` does."""
-    holder: list[TimedClient] = []
+    """The daemon's link and controller service, built by the daemon's own builders from
+    its default ``[board]`` (1 kHz, ``batch_size``) and ``[controller]`` settings; the bench
+    gives the transport opener and the session's trace hooks. Nothing is written to an
+    owner's consumables file."""
+    trace = LatencyTrace()
+    trace.configured_batch = (batch_size, 1000)
+    board = BoardSettings(link=url, sample_rate_hz=1000, batch_size=batch_size)
+    holder: list[LinkSupervisor] = []
 
-    async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
-        return await opener_factory(holder[0])(on_bytes, on_lost)
+    def session() -> BoardSession | None:
+        return holder[0].session if holder else None
 
-    supervisor = LinkSupervisor(url, LinkTiming(), opener=opener)
-    client = TimedClient(supervisor)
-    holder.append(client)
-    configured = asyncio.Event()
-
-    async def setup(board: BoardClient) -> None:
-        await board.configure(sample_rate_hz=1000, batch_size=batch_size)
-        configured.set()
-
-    service = ControllerService(
-        PlasmaController(CutSequence(thc=ThcController())), supervisor, client, board_setup=setup
+    supervisor, client = board_link(
+        board, opener=opener_factory(trace, session), session_trace=trace
     )
-    client.finish_wiring()
-    rig = Rig(supervisor, client, service, configured)
+    holder.append(supervisor)
+    service = controller_service(
+        ControllerSettings(), supervisor, client, board_setup=board_setup(board),
+        consumables=ConsumableLog(None),
+        command_timeout_s=MqttSettings().request_deadline_s + 5.0,
+    )  # fmt: skip
+    rig = Rig(supervisor, client, service, trace)
     rig.tasks.append(asyncio.create_task(supervisor.run(), name="link"))
     rig.tasks.append(asyncio.create_task(service.run(), name="controller"))
     return rig
@@ -215,7 +219,7 @@ def build_rig(
 async def start_cut(rig: Rig, scenario: str, timeout_s: float = 30.0) -> None:
     """Online, configured, a cut started by G-code, THC with target and no lock."""
     await rig.supervisor.wait_online(timeout_s)
-    await asyncio.wait_for(rig.configured.wait(), timeout_s)
+    await asyncio.wait_for(rig.trace.configured.wait(), timeout_s)  # the board set up
     m = load_scenario(scenario).material
     lines = (
         "T112 M6",
@@ -346,7 +350,7 @@ def match_board_e2e(
 ) -> BoardE2e:
     """Match the host's answers to the mock's receipts and sends.
 
-    ``batches``/``answers`` as TimedClient records them (``(stream_seq, t_last_us,
+    ``batches``/``answers`` as LatencyTrace records them (``(stream_seq, t_last_us,
     zvel_seq, samples)``; ``(chunk_ns, out_ns, velocity_seq, batch index)``); ``rx``/``tx``
     as ``log_records`` gives them. An answer's receipt is the one carrying its Z_VELOCITY
     stream seq whose board time is nearest the answered batch's last sample, within
@@ -448,7 +452,7 @@ async def measure_pty(duration_s: float, batch_size: int, scenario: str) -> dict
             ready = await asyncio.wait_for(proc.stdout.readline(), 20.0)
             if not ready.startswith(b"READY"):
                 raise RuntimeError(f"mock did not start: {ready!r}")
-            result, client = await _measure_pty_link(
+            result, trace = await _measure_pty_link(
                 str(pty), proc.pid, duration_s, batch_size, scenario
             )
         finally:
@@ -461,7 +465,7 @@ async def measure_pty(duration_s: float, batch_size: int, scenario: str) -> dict
                     await proc.wait()
         # The mock writes its log when it exits.
         rx, tx = log_records(read_latency_log(log)) if log.exists() else ([], [])
-    matched = match_board_e2e(client.batches, client.answers, rx, tx)
+    matched = match_board_e2e(trace.batches, trace.answers, rx, tx)
     return {"e2e": board_e2e_block(matched, log_ok=bool(rx)), **result}
 
 
@@ -518,22 +522,22 @@ class TimedTransport(Transport):
 
 async def _measure_pty_link(
     url: str, mock_pid: int, duration_s: float, batch_size: int, scenario: str
-) -> tuple[dict[str, object], TimedClient]:
+) -> tuple[dict[str, object], LatencyTrace]:
     reads = [0]
     probe = RttProbe()
 
-    def opener_factory(client: TimedClient) -> Callable[..., Awaitable[Transport]]:
+    def opener_factory(trace: LatencyTrace, session_of: SessionOf) -> TransportOpener:
         async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
             def timed(data: bytes) -> None:
                 t_ns = time.perf_counter_ns()
-                client.chunk_ns = t_ns
+                trace.chunk_ns = t_ns
                 reads[0] += 1
                 on_bytes(data)
                 if probe.expect is not None:
                     probe.on_read(data, t_ns)
 
             def boot_id() -> int | None:
-                session = client.link.session
+                session = session_of()
                 return None if session is None else session.boot_id
 
             inner = await open_transport(url, timed, on_lost)
@@ -544,7 +548,7 @@ async def _measure_pty_link(
     rig = build_rig(url, opener_factory, batch_size)
     try:
         await start_cut(rig, scenario)
-        client = rig.client
+        trace = rig.trace
         active = [0, 0]
 
         async def probe_rtt() -> None:
@@ -566,10 +570,10 @@ async def _measure_pty_link(
         mock_cpu0 = proc_cpu_s(mock_pid)
         usage0 = resource.getrusage(resource.RUSAGE_SELF)
         wall0 = time.perf_counter()
-        client.recording = True
+        trace.recording = True
         prober = asyncio.create_task(probe_rtt(), name="rtt-probe")
         await asyncio.sleep(duration_s)
-        client.recording = False
+        trace.recording = False
         prober.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await prober
@@ -583,7 +587,7 @@ async def _measure_pty_link(
     finally:
         await rig.close()
     cpu_s = (usage1.ru_utime - usage0.ru_utime) + (usage1.ru_stime - usage0.ru_stime)
-    batches, answers = client.batches, client.answers
+    batches, answers = trace.batches, trace.answers
     host = [(out - chunk) / 1000 for chunk, out, _, _ in answers]
     bounds, after = board_bound(batches, answers)
     host_p = percentiles(host)
@@ -621,7 +625,7 @@ async def _measure_pty_link(
         ),
         "rss_mb": None if rss_kb is None else round(rss_kb / 1024, 1),
         "peak_rss_mb": None if hwm_kb is None else round(hwm_kb / 1024, 1),
-    }, client
+    }, trace
 
 
 # --- in-process processing -----------------------------------------------------------------
@@ -686,14 +690,14 @@ def make_frames(
 async def feed_paced(
     rig: Rig, link: SimLink, frames: Sequence[bytes], batch: int
 ) -> dict[str, object]:
-    client = rig.client
-    client.batches.clear()
-    client.answers.clear()
+    trace = rig.trace
+    trace.batches.clear()
+    trace.answers.clear()
     loop = asyncio.get_running_loop()
     spacing = batch / 1000.0
     calls: list[float] = []
     active = 0
-    client.recording = True
+    trace.recording = True
     start = loop.time()
     i = 0
     n = len(frames)
@@ -704,20 +708,20 @@ async def feed_paced(
         now = loop.time()
         while i < n and start + i * spacing <= now:
             t_in = time.perf_counter_ns()
-            client.chunk_ns = t_in
+            trace.chunk_ns = t_in
             link.feed(frames[i])
             calls.append((time.perf_counter_ns() - t_in) / 1000)
             active += rig.thc_active()
             i += 1
-    client.recording = False
+    trace.recording = False
     wall = loop.time() - start
-    latencies = [(out - chunk) / 1000 for chunk, out, _, _ in client.answers]
+    latencies = [(out - chunk) / 1000 for chunk, out, _, _ in trace.answers]
     return {
         "batch": batch,
         "batches": n,
         "data_s": round(n * spacing, 2),
         "wall_s": round(wall, 2),
-        "answers": len(client.answers),
+        "answers": len(trace.answers),
         "thc_active_fraction": round(active / n, 4) if n else None,
         "processing_us": percentiles(latencies),
         "call_us": percentiles(calls),
@@ -733,7 +737,7 @@ async def measure_in_process(
     board.plant.gantry.feed_line(f"G1 X1150 Y100 F{FEED_MM_MIN:g}")
     links: list[SimLink] = []
 
-    def opener_factory(client: TimedClient) -> Callable[..., Awaitable[Transport]]:
+    def opener_factory(_trace: LatencyTrace, _session_of: SessionOf) -> TransportOpener:
         async def opener(on_bytes: BytesCallback, on_lost: LostCallback) -> Transport:
             link = SimLink(board, on_bytes, on_lost)
             links.append(link)
@@ -748,7 +752,7 @@ async def measure_in_process(
         link = links[-1]
         link.stop_board()
         await link.ticker
-        last = rig.client.last_batch
+        last = rig.trace.last_batch
         target = rig.sequence.thc.target_v
         assert last is not None
         assert target is not None

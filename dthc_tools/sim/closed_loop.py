@@ -2,8 +2,8 @@
 
 Not a model of the daemon: the daemon itself. A ``ControllerService`` built as ``dthc-bridge
 run`` builds it (``daemon.controller_service`` on the daemon's own ``[controller]``
-defaults unless given others), with its ``LinkSupervisor`` and ``BoardClient``,
-talks the wire protocol to a
+defaults unless given others), with its ``LinkSupervisor`` and ``BoardClient`` built as
+the daemon builds them (``daemon.board_link``), talks the wire protocol to a
 :class:`~mock_device.sim.SimulatedBoard` over :class:`~.link.SimulatedLink`. So the
 actions-to-protocol and reports-to-sequence mappings the benchmarks measure are the
 daemon's own.
@@ -31,14 +31,12 @@ from typing import Any, TypeVar
 
 import looptime
 
-from dthc_bridge.board import BoardClient
 from dthc_bridge.config import BoardSettings, ControllerSettings
 from dthc_bridge.consumables import ConsumableLog
 from dthc_bridge.controller.sequence import CutSequence, SequenceConfig, State
 from dthc_bridge.controller.thc import ThcConfig
-from dthc_bridge.daemon import controller_service
+from dthc_bridge.daemon import board_link, controller_service
 from dthc_bridge.events import ArcLost, ControllerEvent, ProgramPaused
-from dthc_bridge.link import LinkSupervisor
 from dthc_bridge.mqtt.settings import MqttSettings
 from dthc_bridge.port import CommandResult
 from dthc_bridge.transport import BytesCallback, LostCallback, Transport
@@ -167,10 +165,9 @@ class ClosedLoop:
         # The daemon's own defaults (no file, no environment), where the caller names none.
         configs = self.settings.configs()
         runtime = self._runtime
-        self.supervisor = LinkSupervisor(
-            "sim://board", BoardSettings().timing(), opener=runtime.open_link
+        self.supervisor, self.client = board_link(
+            BoardSettings(link="sim://board"), opener=runtime.open_link
         )
-        self.client = BoardClient(self.supervisor)
         self.service = controller_service(
             self.settings, self.supervisor, self.client,
             configs=configs._replace(sequence=config or configs.sequence, thc=thc or configs.thc),

@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 import firmware_protocol as fp
+from dthc_bridge.board import FaultReport
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.events import BoardFaulted, ProgramPaused
 from tests.controller.test_sequence import SQUARE, ready
@@ -109,15 +110,15 @@ def test_the_material_selector_chooses_the_next_cuts_material() -> None:
     )
 
 
-def lease_fault(detail: int) -> fp.Fault:
+def lease_fault(detail: int, t_s: float) -> FaultReport:
     latched = 0 if detail == fp.LEASE_DETAIL_IDLE else 1 << fp.FaultCode.LEASE_EXPIRED
-    return fp.Fault(0, 9, 3_000_000, fp.FaultCode.LEASE_EXPIRED, detail, latched, 21_500)
+    return FaultReport(t_s, fp.FaultCode.LEASE_EXPIRED, detail, latched, 21.5)
 
 
 def test_a_lease_lapsed_at_rest_is_logged_not_a_fault_to_rearm() -> None:
     """The board latched nothing (nothing lit, Z at rest): the daemon does not either."""
     loop = ready()
-    loop.service._on_board(lease_fault(fp.LEASE_DETAIL_IDLE), loop.now)
+    loop.service._on_report(lease_fault(fp.LEASE_DETAIL_IDLE, loop.now))
     assert loop.sequence.state is State.IDLE
     assert not [e for e in loop.events if isinstance(e, BoardFaulted)]
     assert loop.m3().ok  # the next cut runs with no re-arm
@@ -125,10 +126,10 @@ def test_a_lease_lapsed_at_rest_is_logged_not_a_fault_to_rearm() -> None:
 
 def test_a_lease_lost_during_a_cut_or_latched_still_latches() -> None:
     loop = ready()
-    loop.service._on_board(lease_fault(fp.LEASE_DETAIL_LATCHED), loop.now)
+    loop.service._on_report(lease_fault(fp.LEASE_DETAIL_LATCHED, loop.now))
     assert loop.sequence.state is State.FAULTED
     assert loop.sequence.error == "board fault: LEASE_EXPIRED"
     cutting = ready()
     assert cutting.m3().ok
-    cutting.service._on_board(lease_fault(fp.LEASE_DETAIL_IDLE), cutting.now)
+    cutting.service._on_report(lease_fault(fp.LEASE_DETAIL_IDLE, cutting.now))
     assert cutting.sequence.state is State.FAULTED  # busy: never taken for an idle lapse

@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 
 import firmware_protocol as fp
+from dthc_bridge.board import Batch, batch_from_wire
 from dthc_bridge.controller.sequence import CutSequence
 from dthc_bridge.controller.thc import Lock, ThcController
 from dthc_bridge.events import ControllerEvent
@@ -15,8 +16,8 @@ from dthc_bridge.service import HOST_SPEED_STALE_S, ControllerService, feed_samp
 from tests.daemon.test_material_requests import service_for
 
 
-def batch(xy_dmm_s: int = fp.XY_SPEED_UNKNOWN) -> fp.Samples:
-    return fp.Samples(0, 0, 0, 1000, 1500, 0, 0, xy_dmm_s, 0, (11800,) * 10)
+def batch(t_s: float, xy_dmm_s: int = fp.XY_SPEED_UNKNOWN) -> Batch:
+    return batch_from_wire(fp.Samples(0, 0, 0, 1000, 1500, 0, 0, xy_dmm_s, 0, (11800,) * 10), t_s)
 
 
 @pytest.fixture
@@ -62,17 +63,17 @@ async def test_a_bad_motion_request_names_it_and_changes_nothing(
 def test_the_host_speed_feeds_the_anti_dive_only_without_a_board_speed() -> None:
     sequence = CutSequence()
     thc = sequence.thc
-    feed_samples(sequence, batch(), 1.0, 25.0, host_speed_mm_s=25.0)
-    feed_samples(sequence, batch(), 1.15, 25.0, host_speed_mm_s=25.0)  # at speed 0.15 s
+    feed_samples(sequence, batch(1.0), 25.0, host_speed_mm_s=25.0)
+    feed_samples(sequence, batch(1.15), 25.0, host_speed_mm_s=25.0)  # at speed 0.15 s
     assert Lock.NO_SPEED not in thc.locks(1.15)
     assert not thc._s.velocity_locked
-    feed_samples(sequence, batch(), 1.16, 25.0, host_speed_mm_s=10.0)  # a corner: 40 %
+    feed_samples(sequence, batch(1.16), 25.0, host_speed_mm_s=10.0)  # a corner: 40 %
     assert thc._s.velocity_locked
     # The board's own speed wins over the host's.
-    _, xy = feed_samples(sequence, batch(xy_dmm_s=250), 1.17, 25.0, host_speed_mm_s=10.0)
+    xy = feed_samples(sequence, batch(1.17, xy_dmm_s=250), 25.0, host_speed_mm_s=10.0)
     assert xy == 25.0
     # No speed at all: locked as unknown.
-    feed_samples(sequence, batch(), 1.3, 25.0, host_speed_mm_s=None)
+    feed_samples(sequence, batch(1.3), 25.0, host_speed_mm_s=None)
     assert Lock.NO_SPEED in thc.locks(1.3)
 
 

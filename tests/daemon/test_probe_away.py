@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import pytest
 
 import firmware_protocol as fp
-from dthc_bridge.board import BoardClient
+from dthc_bridge.board import BoardClient, ProbeEnded
 from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.link import BoardTooOld, LinkSupervisor, LinkTiming, NegativeAck
@@ -48,7 +48,7 @@ async def rig(request: pytest.FixtureRequest) -> AsyncIterator[Rig]:
                 await task
 
 
-async def _touch_off(rig: Rig) -> fp.ProbeResult:
+async def _touch_off(rig: Rig) -> ProbeEnded:
     """Z 3 mm above the plate, then down onto the float switch."""
     surface_mm = rig.sim.board.plant.surface_z_mm
     await rig.client.move_z(surface_mm + 3.0, 50.0)
@@ -66,12 +66,13 @@ async def test_start_probe_away_lifts_off_the_float_switch_and_reports_the_relea
     touch = await _touch_off(rig)
     fw = rig.sim.board.firmware
     seq = await rig.client.start_probe(1.0, 5.0, FLOAT, away=True)
-    away = await rig.client.wait_report(fp.ProbeResult, seq, 10.0)
+    away = await rig.client.wait_probe(seq, 10.0)
     assert fw.executed["ZProbeAway"] == 1
     assert away.result == fp.ProbeOutcome.RELEASED
     assert away.sensor == FLOAT
-    assert touch.stop_z_um < away.contact_z_um <= touch.contact_z_um + 300
-    assert away.contact_z_um <= away.stop_z_um <= away.contact_z_um + 50
+    eps = 1e-9  # µm on the wire, mm here: a bound met exactly stays met
+    assert touch.stop_z_mm < away.contact_z_mm <= touch.contact_z_mm + 0.3 + eps
+    assert away.contact_z_mm <= away.stop_z_mm <= away.contact_z_mm + 0.05 + eps
     assert not fw.inputs & FLOAT
     assert fw.faults == 0
 
@@ -111,5 +112,5 @@ async def test_the_service_performs_probe_z_away_and_reports_the_release(
     await asyncio.wait_for(done.wait(), 10.0)
     ((contact, ohmic, contact_z, stop_z),) = heard
     assert (contact, ohmic) == (True, False)
-    assert touch.stop_z_um / 1000 < contact_z <= stop_z
+    assert touch.stop_z_mm < contact_z <= stop_z
     assert rig.sim.board.firmware.executed["ZProbeAway"] == 1

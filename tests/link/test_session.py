@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 from collections.abc import AsyncIterator
 
 import pytest
 
 import firmware_protocol as fp
-from dthc_bridge.board import BoardClient
+from dthc_bridge.board import Batch, BoardClient
 from dthc_bridge.link import (
     BoardRebooted,
     LinkDown,
@@ -94,12 +95,11 @@ async def test_the_same_command_sequence_completes_over_hostile_links(rig: Rig) 
     fw = rig.sim.board.firmware
     await client.ohmic_sense(True)
     moved = await client.move_z(40.0, 50.0)
-    assert moved.result == fp.MotionResult.REACHED
-    assert moved.z_um == 40_000
+    assert moved.reached
+    assert moved.z_mm == 40.0
     probe = await client.probe(feed_mm_s=10.0, max_travel_mm=30.0)
     assert probe.result == fp.ProbeOutcome.CONTACT
-    surface_um = rig.sim.board.plant.surface_z_mm * 1000
-    assert abs(probe.contact_z_um - surface_um) < 300
+    assert abs(probe.contact_z_mm - rig.sim.board.plant.surface_z_mm) < 0.3
     await client.torch(True)
     assert fw.torch_on
     status = await client.status()
@@ -209,17 +209,20 @@ async def test_lost_sample_batches_are_counted_as_gaps(rig: Rig) -> None:
 
 
 async def test_telemetry_stream_yields_samples_with_board_order(rig: Rig) -> None:
-    """The async telemetry stream delivers sample batches in stream order."""
+    """The async telemetry stream delivers sample batches, in SI units, in board order:
+    each a batch's span after the one before."""
     await rig.supervisor.wait_online(2.0)
-    seqs: list[int] = []
+    batches: list[Batch] = []
     stream = rig.client.telemetry()
     async for item in stream:
-        if isinstance(item, fp.Samples):
-            seqs.append(item.stream_seq)
-        if len(seqs) == 10:
+        if isinstance(item, Batch):
+            batches.append(item)
+        if len(batches) == 10:
             break
     await stream.aclose()
-    assert seqs == [(seqs[0] + i) & 0xFFFF for i in range(10)]
+    for before, after in itertools.pairwise(batches):
+        assert after.t_s - before.t_s == pytest.approx(after.duration_s, abs=1e-6)
+    assert all(after.period_s == pytest.approx(0.001) for after in batches)
 
 
 async def test_a_fault_latched_before_the_session_comes_from_status_not_reports(

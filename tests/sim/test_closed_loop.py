@@ -7,8 +7,7 @@ import dataclasses
 import pytest
 import structlog
 
-import firmware_protocol as fp
-from dthc_bridge.board import Telemetry
+from dthc_bridge.board import Batch
 from dthc_bridge.config import DaemonConfig
 from dthc_bridge.controller.sequence import State
 from dthc_bridge.daemon import build_service
@@ -54,11 +53,10 @@ def test_two_batches_read_together_keep_their_board_spacing() -> None:
     loop = ClosedLoop("flat_clean", seed=2)
     seen: list[float] = []
 
-    def note(item: Telemetry, _t_s: float) -> None:
-        if isinstance(item, fp.Samples):
-            seen.append(loop.sequence.now)  # after the service's listener handled it
+    def note(_batch: Batch) -> None:
+        seen.append(loop.sequence.now)  # after the service's listener handled it
 
-    loop.client.add_listener(note)
+    loop.client.add_samples_listener(note)
     loop.step()
     seen.clear()
     loop.board.advance_ms(2 * BATCH_S * 1000)  # two batches wait in the board's output
@@ -109,7 +107,8 @@ def test_a_reboot_no_reply_has_shown_ends_the_cut_at_once() -> None:
     loop.plant.gantry.feed_line("G1 X300 Y50 F5500")
     loop.run_until(lambda: False, 1.0)
     times: list[float] = []
-    loop.client.add_listener(lambda _item, _t: times.append(loop.sequence.now))
+    loop.client.add_samples_listener(lambda _batch: times.append(loop.sequence.now))
+    loop.client.add_report_listener(lambda _report: times.append(loop.sequence.now))
     loop.board.reboot()
     assert loop.run_until(lambda: loop.sequence.state is State.FAULTED, 0.02)
     assert any(isinstance(e, BoardRestarted) for e in loop.events)
