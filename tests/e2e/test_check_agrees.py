@@ -1,11 +1,12 @@
 """check-program and the machine agree (issue 31): a program of each form in
-tests/programs (ON_THE_STACK; all of them, in every dialect, in tests/sim/
-test_every_dialect.py), with the options its shop would give (a material library, its own
-codes), is checked, then run through the stack (mosquitto, the daemon and the mock as processes, the reference sender)
-with the same options and the dialect detection an owner gets by default. A program the
-check calls runnable runs every cut it listed to completion, one row per cut; a program it
-refuses stops at the line it refused first. (Whether a cut is good is the program's and
-the scenario's: a fixed voltage the sheet does not give makes the THC follow it.)"""
+tests/programs (ON_THE_STACK; all of them, in every dialect, in
+tests/sim/test_every_dialect.py), with the options its shop would give (a material
+library, its own codes), is checked, then run through the stack (mosquitto, the daemon and
+the mock as processes, the reference sender) with the same options and the dialect
+detection an owner gets by default. A program the check calls runnable runs every cut it
+listed to completion, one row per cut; a program it refuses stops at the line it refused
+first. (Whether a cut is good is the program's and the scenario's: a fixed voltage the
+sheet does not give makes the THC follow it.)"""
 
 from __future__ import annotations
 
