@@ -346,7 +346,9 @@ static void send_batch(void)
     dthc_samples_put_z_um(p, board_z_um());
     dthc_samples_put_inputs(p, B.inputs);
     dthc_samples_put_zvel_seq(p, B.zvel_seq);
-    dthc_samples_put_xy_speed_dmm_s(p, DTHC_XY_SPEED_UNKNOWN);
+    dthc_samples_put_xy_speed_dmm_s(p, (B.cfg->capabilities & DTHC_CAP_XY_SPEED)
+                                           ? hal_xy_speed_dmm_s()
+                                           : DTHC_XY_SPEED_UNKNOWN);
     dthc_samples_put_status(p, board_status_bits());
     if (!samples_ready_len) {
         samples_ready_len = len;

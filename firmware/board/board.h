@@ -20,6 +20,9 @@
 #ifndef BOARD_MA_MAX
 #define BOARD_MA_MAX 32 /* moving-average window limit */
 #endif
+#ifndef BOARD_CURRENT_OUT
+#define BOARD_CURRENT_OUT 0 /* 1: SET_CURRENT drives hal_set_current_da (CURRENT_OUT) */
+#endif
 
 #define BOARD_FW_MAJOR 0
 #define BOARD_FW_MINOR 1
