@@ -179,7 +179,11 @@ static void read_inputs(void)
  * (board_z_busy: the status byte's Z_BUSY). */
 static bool board_at_rest(void)
 {
+#if BOARD_LEASE_IDLE_LAPSE
     return !B.torch && !B.ohmic && !board_z_busy();
+#else
+    return false; /* protocol 1.0: a lapse latches whatever the board is doing */
+#endif
 }
 
 /* The lease ran out (tick context). In use: latched, outputs off, Z stopped, re-armed only
