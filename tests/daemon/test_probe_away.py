@@ -15,7 +15,7 @@ from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.link import BoardTooOld, LinkSupervisor, LinkTiming, NegativeAck
 from dthc_bridge.service import ControllerService
-from mock_device.firmware import BoardIdentity
+from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from tests.link.board_harness import RealtimeSimBoard
 
