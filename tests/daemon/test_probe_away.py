@@ -1,5 +1,6 @@
 """The daemon's probe away (G38.4/G38.5 on Z, protocol 1.2): BoardClient and the service's
-ProbeZ(away=True) against the mock firmware, ticking in real time behind a memory link."""
+ProbeZ(away=True) against the mock (the C board logic), ticking in real time behind a memory
+link."""
 
 from __future__ import annotations
 
