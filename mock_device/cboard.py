@@ -164,7 +164,8 @@ class CBoard:
         self.hal: HostHal = lib.host_hal().contents
         self._state = HostState()
         self._state_ref = ctypes.byref(self._state)
-        weakref.finalize(self, _unload, lib._handle)
+        # Unmapped with the board, not at interpreter exit (something may still read it).
+        weakref.finalize(self, _unload, lib._handle).atexit = False
 
     def init(
         self, *, serial: str, capabilities: int, z_min_um: int, z_max_um: int, z_boot_um: int,
