@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware codegen clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware board-lib cc-tools codegen clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -51,6 +51,18 @@ avr-tools:
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $(AVR_PACKAGES) >/dev/null; }
 
+# The mock device runs the firmware's board logic (firmware/board/) as a shared library
+# (firmware/build/host/libdthc_board.so, STYLE 23): it needs a C compiler and make; install
+# Debian's where they are missing.
+cc-tools:
+	@{ command -v make >/dev/null 2>&1 && { command -v cc >/dev/null 2>&1 || command -v gcc >/dev/null 2>&1; }; } || { \
+	  echo "installing a C compiler (apt-get gcc libc6-dev make)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends gcc libc6-dev make >/dev/null; }
+
+board-lib: cc-tools
+	$(MAKE) --no-print-directory -C firmware host
+
 # The HEX and ELF a table owner flashes (Mega 2560 and Nano), their flash and RAM use, and
 # the emulated-board harness that runs them.
 firmware: avr-tools
@@ -72,15 +84,15 @@ typecheck: $(STAMP)
 
 # Two workers, a test file each at a time (module fixtures, such as one emulated board,
 # stay shared): the end-to-end tests spend most of their time waiting on real time.
-unit: $(STAMP)
+unit: $(STAMP) board-lib
 	$(BIN)/pytest -q -n 2 --dist loadfile
 
 test: $(STAMP) broker browser systemd-tools firmware lint typecheck unit
 
-bench: $(STAMP)
+bench: $(STAMP) board-lib
 	for suite in codec control latency soak faults fuzz scale; do $(BIN)/dthc-bridge bench $$suite --json; done
 
-demo: $(STAMP)
+demo: $(STAMP) board-lib
 	$(BIN)/dthc-bridge demo
 
 clean:

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from firmware_protocol import Capability
 
+from .board_logic import BoardIdentity
 from .faults import FaultPlan
-from .firmware import BoardIdentity
 from .links import BoardLink, PtyLink, TcpLink
 from .plant import list_scenarios
 from .process import MockBoardProcess, ProcessOptions

@@ -19,8 +19,10 @@ JSON lines over TCP, one request per line, one reply per request:
                             breakaway latches its fault (and FAULT_RESET is refused while it
                             is held), a forced float or ohmic contact stops a probe, a forced
                             arc OK counts for ARC_LOST. Ohmic contact shows only while ohmic
-                            sensing is on, as on a real board. (This mock latches Z_LIMIT at
-                            its soft limits; a forced limit switch is reported, no more.)
+                            sensing is on, as on a real board. A forced Z limit switch acts
+                            as on the reference firmware (the mock runs its board logic): it
+                            stops motion towards it at once, and latches Z_LIMIT when Z was
+                            driven into it.
 
 A bad line or op gets {"ok": false, "error": "..."} and changes nothing.
 """

@@ -214,7 +214,7 @@ class MockBoardProcess:
                     if self._parent_gone():
                         break
                 fw = self.board.firmware
-                wake = self.board.due_at_s(fw.t_us + fw.sampling.period_us * fw.sampling.batch_size)
+                wake = self.board.due_at_s(fw.t_us + fw.period_us * fw.batch_size)
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self.stop.wait(), max(0.0, wake - loop.time()))
         finally:
@@ -258,7 +258,7 @@ class MockBoardProcess:
             unsafe_torch_ms=self.board.unsafe_torch_us / 1000,
             unplugs=self.unplugs,
             reboots=self.reboots,
-            rx_crc_errors=fw.decoder.stats.crc_errors,
+            rx_crc_errors=fw.crc_errors,
             faults=f"0x{fw.faults:04x}",
             torch_on=fw.torch_on,
             executed=dict(sorted(fw.executed.items())),

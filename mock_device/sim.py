@@ -1,4 +1,5 @@
-"""Simulated-time board: firmware + plant stepped by a clock, in-process, no I/O.
+"""Simulated-time board: the board logic (firmware/board/, C) + plant stepped by a clock,
+in-process, no I/O.
 
 Tests and benchmarks drive it directly: write host bytes, advance time, read board bytes.
 """
@@ -9,8 +10,8 @@ import random
 
 import firmware_protocol as fp
 
+from .board_logic import BoardIdentity, BoardLogic
 from .faults import FaultPlan, LinkFaultInjector
-from .firmware import BoardFirmware, BoardIdentity
 from .plant import Plant, load_scenario
 
 __all__ = ["SimulatedBoard"]
@@ -24,7 +25,7 @@ class SimulatedBoard:
         *,
         identity: BoardIdentity | None = None,
         faults: FaultPlan | None = None,
-        firmware_class: type[BoardFirmware] = BoardFirmware,
+        firmware_class: type[BoardLogic] = BoardLogic,
     ) -> None:
         self.seed = seed
         self.rng = random.Random(seed)
@@ -40,7 +41,7 @@ class SimulatedBoard:
         )
         # Real-time pacing (tick_due): the firmware it was anchored on, the real clock and
         # board time at the anchor. A reboot's new firmware is anchored again.
-        self._anchor: tuple[BoardFirmware, float, int] | None = None
+        self._anchor: tuple[BoardLogic, float, int] | None = None
 
     def _board_write(self, frame: bytes) -> None:
         self._out += self.faults.outgoing(frame)
@@ -67,7 +68,7 @@ class SimulatedBoard:
             self._anchor = (fw, now_s, fw.t_us)
         _, t0_s, fw_t0_us = self._anchor
         due_us = fw_t0_us + round((now_s - t0_s) * 1e6)
-        period_us = fw.sampling.period_us
+        period_us = fw.period_us
         ticks = 0
         # A tick's sample is taken at the tick's end: run it once its time has come, or
         # its batch leaves before the board time it carries.
@@ -83,12 +84,13 @@ class SimulatedBoard:
         return t0_s + (board_us - fw_t0_us) / 1e6
 
     def advance_ms(self, ms: float) -> None:
-        period_us = self.firmware.sampling.period_us
+        period_us = self.firmware.period_us
         for _ in range(max(1, round(ms * 1000 / period_us))):
             self.firmware.tick()
 
     def reboot(self) -> None:
-        """Power-cycle the board: a new firmware instance, a new boot id; the plant stays."""
+        """Power-cycle the board: the board logic starts again (a new boot id, reset reason
+        WATCHDOG), Z where it stands; the plant stays."""
         self.unsafe_torch_us_before_reboots += self.firmware.unsafe_torch_us
         self.plant.set_torch(False)
         self.firmware = self.firmware_class(

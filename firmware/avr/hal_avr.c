@@ -511,6 +511,12 @@ static uint32_t mix32(uint32_t h, uint32_t v)
     return h;
 }
 
+/* No XY speed input on these boards (capability XY_SPEED not advertised): never called. */
+uint16_t hal_xy_speed_dmm_s(void)
+{
+    return DTHC_XY_SPEED_UNKNOWN;
+}
+
 uint32_t hal_entropy32(void)
 {
     uint32_t h = 0x811C9DC5UL;

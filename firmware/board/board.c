@@ -179,7 +179,11 @@ static void read_inputs(void)
  * (board_z_busy: the status byte's Z_BUSY). */
 static bool board_at_rest(void)
 {
+#if BOARD_LEASE_IDLE_LAPSE
     return !B.torch && !B.ohmic && !board_z_busy();
+#else
+    return false; /* protocol 1.0: a lapse latches whatever the board is doing */
+#endif
 }
 
 /* The lease ran out (tick context). In use: latched, outputs off, Z stopped, re-armed only
@@ -346,7 +350,9 @@ static void send_batch(void)
     dthc_samples_put_z_um(p, board_z_um());
     dthc_samples_put_inputs(p, B.inputs);
     dthc_samples_put_zvel_seq(p, B.zvel_seq);
-    dthc_samples_put_xy_speed_dmm_s(p, DTHC_XY_SPEED_UNKNOWN);
+    dthc_samples_put_xy_speed_dmm_s(p, (B.cfg->capabilities & DTHC_CAP_XY_SPEED)
+                                           ? hal_xy_speed_dmm_s()
+                                           : DTHC_XY_SPEED_UNKNOWN);
     dthc_samples_put_status(p, board_status_bits());
     if (!samples_ready_len) {
         samples_ready_len = len;

@@ -20,6 +20,16 @@
 #ifndef BOARD_MA_MAX
 #define BOARD_MA_MAX 32 /* moving-average window limit */
 #endif
+#ifndef BOARD_LEASE_IDLE_LAPSE
+/* 1: a lease that runs out at rest is reported, not latched (protocol 1.1, section 4). 0:
+ * protocol 1.0's lease, latched at rest too: only the mock device builds it, as a board
+ * that announces 1.1 without keeping its rule (mock_device/variants.py, idle-lapse-latched)
+ * for the conformance suite to catch. */
+#define BOARD_LEASE_IDLE_LAPSE 1
+#endif
+#ifndef BOARD_CURRENT_OUT
+#define BOARD_CURRENT_OUT 0 /* 1: SET_CURRENT drives hal_set_current_da (CURRENT_OUT) */
+#endif
 
 #define BOARD_FW_MAJOR 0
 #define BOARD_FW_MINOR 1

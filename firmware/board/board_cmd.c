@@ -137,7 +137,11 @@ static uint8_t status(void)
     dthc_status_put_sample_seq(p, B.sample_seq);
     dthc_status_put_zvel_seq(p, B.zvel_seq);
     dthc_status_put_z_um(p, board_z_um());
+#if BOARD_CURRENT_OUT
+    dthc_status_put_current_da(p, B.current_da);
+#else
     dthc_status_put_current_da(p, 0); /* no CURRENT_OUT */
+#endif
     dthc_status_put_rx_crc_errors(p, sat16(board_rx.crc_errors));
     dthc_status_put_rx_framing_errors(p, sat16(board_rx.framing_errors));
     dthc_status_put_rx_duplicates(p, B.rx_duplicates);
@@ -335,8 +339,16 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         board_z_stop();
         reply(seq, 0, 0);
         break;
-    case DTHC_MSG_SET_CURRENT: /* no CURRENT_OUT on this board */
-        reply(seq, DTHC_NAK_UNSUPPORTED, 5);
+    case DTHC_MSG_SET_CURRENT:
+#if BOARD_CURRENT_OUT
+        if (B.cfg->capabilities & DTHC_CAP_CURRENT_OUT) {
+            B.current_da = dthc_set_current_get_current_da(p);
+            hal_set_current_da(B.current_da);
+            reply(seq, 0, 0);
+            break;
+        }
+#endif
+        reply(seq, DTHC_NAK_UNSUPPORTED, 5); /* no CURRENT_OUT on this board */
         break;
     case DTHC_MSG_CONFIGURE: {
         uint8_t bad;

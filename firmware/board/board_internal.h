@@ -89,6 +89,9 @@ typedef struct {
     /* outputs and inputs */
     bool torch;
     bool ohmic;
+#if BOARD_CURRENT_OUT
+    uint16_t current_da; /* the last SET_CURRENT */
+#endif
     uint16_t inputs;
     bool arc_ok_seen;
     bool arc_off_timing;

@@ -59,6 +59,13 @@ uint16_t hal_inputs(void);
 /* Arc voltage in centivolts by the front end's nominal scaling (the board calibrates it),
  * averaged over the conversions since the previous call. */
 uint16_t hal_arc_raw(void);
+/* The XY path speed of the table in 0.1 mm/s (SAMPLES.xy_speed_dmm_s), read once per
+ * batch; called only when the build has capability XY_SPEED (a port without a speed input
+ * returns DTHC_XY_SPEED_UNKNOWN, 0xFFFF). */
+uint16_t hal_xy_speed_dmm_s(void);
+/* The cutter's current set point in 0.1 A (SET_CURRENT), called only by a build with
+ * BOARD_CURRENT_OUT=1 and capability CURRENT_OUT (no AVR build has an output for it). */
+void hal_set_current_da(uint16_t current_da);
 
 /* --- Z step generator ------------------------------------------------------------------- */
 

@@ -137,6 +137,16 @@ uint16_t hal_arc_raw(void)
     return F.arc_raw;
 }
 
+uint16_t hal_xy_speed_dmm_s(void)
+{
+    return F.xy_speed_dmm_s;
+}
+
+void hal_set_current_da(uint16_t current_da)
+{
+    F.current_da = current_da;
+}
+
 void hal_z_drive(int32_t rate_steps_s, int32_t lo_steps, int32_t hi_steps)
 {
     F.rate = rate_steps_s;

@@ -12,6 +12,8 @@ typedef struct {
     int tick_locked;
     uint16_t inputs;        /* what hal_inputs returns (protocol order, active = 1) */
     uint16_t arc_raw;       /* what hal_arc_raw returns */
+    uint16_t xy_speed_dmm_s; /* what hal_xy_speed_dmm_s returns */
+    uint16_t current_da;    /* the last hal_set_current_da */
     bool torch;
     bool ohmic;
     int32_t steps;          /* the step generator's position */

@@ -1224,6 +1224,52 @@ static int test_unsupported_and_lease_range(void)
     return 0;
 }
 
+/* A board with an XY speed input and a current output (the mock device's build): SAMPLES
+ * carry the speed read at the batch, SET_CURRENT is applied and reported by STATUS. The
+ * same logic without the capabilities: 0xFFFF and NAK UNSUPPORTED (the AVR builds). */
+static const board_config_t CONFIG_XY = {
+    "DTHC-TEST-0002",
+    DTHC_CAP_XY_SPEED | DTHC_CAP_CURRENT_OUT | DTHC_CAP_OHMIC | DTHC_CAP_FLOAT,
+    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON,
+};
+
+static int test_xy_speed_and_current_out(void)
+{
+    unsigned mark;
+    const frame_t *f;
+    uint8_t seq;
+    F.xy_speed_dmm_s = 417; /* 41.7 mm/s: ignored without the capability */
+    hello();
+    mark = n_out;
+    run_ms(10);
+    f = last(DTHC_MSG_SAMPLES, -1, mark);
+    CHECK(f && dthc_samples_get_xy_speed_dmm_s(f->p) == DTHC_XY_SPEED_UNKNOWN,
+          "no XY_SPEED: 0xFFFF");
+    board_init(&CONFIG_XY, 0xC0FFEE02u);
+    hello();
+    mark = n_out;
+    run_ms(10);
+    f = last(DTHC_MSG_SAMPLES, -1, mark);
+    CHECK(f && dthc_samples_get_xy_speed_dmm_s(f->p) == 417, "XY speed carried");
+    F.xy_speed_dmm_s = 0;
+    mark = n_out;
+    run_ms(5);
+    f = last(DTHC_MSG_SAMPLES, -1, mark);
+    CHECK(f && dthc_samples_get_xy_speed_dmm_s(f->p) == 0, "standing still: 0");
+#if BOARD_CURRENT_OUT
+    seq = cmd_u16(DTHC_MSG_SET_CURRENT, 450);
+    CHECK(is_ack(seq, 0) && F.current_da == 450, "SET_CURRENT applied");
+    mark = n_out;
+    seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_STATUS);
+    f = last(DTHC_MSG_STATUS, seq, mark);
+    CHECK(f && dthc_status_get_current_da(f->p) == 450, "STATUS current_da");
+#else
+    seq = cmd_u16(DTHC_MSG_SET_CURRENT, 450);
+    CHECK(nak_code(seq, 0, NULL) == DTHC_NAK_UNSUPPORTED, "no BOARD_CURRENT_OUT build");
+#endif
+    return 0;
+}
+
 /* Board-side ARC_LOST: torch on, arc OK seen, then gone for arc_lost_ms. */
 static int test_arc_lost(void)
 {
@@ -1311,6 +1357,7 @@ static const struct {
     T(batch_waits_for_a_short_frame),
     T(unsupported_and_lease_range),
     T(arc_lost),
+    T(xy_speed_and_current_out),
     T(limit_switch_stops_and_latches),
 #undef T
 };

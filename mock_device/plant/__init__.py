@@ -1,7 +1,8 @@
 """Physics behind the simulated DTHC board: pure, deterministic, simulated time.
 
-No I/O, no asyncio, no threads, no wall clock. The board firmware emulation owns a
-:class:`Plant` and calls ``Plant.step(dt_s)`` once per sample period.
+No I/O, no asyncio, no threads, no wall clock. The board (mock_device.board_logic, the
+firmware's C board logic) owns a :class:`Plant` and calls ``Plant.step(dt_s)`` once per
+sample period.
 """
 
 from .arc import Arc, ArcEnd, ArcState

@@ -1,10 +1,12 @@
 """The plant: plate, gantry, Z axis, torch head, arc, noise and THC box, in simulated time.
 
-The board firmware emulation owns a ``Plant`` and, once per sample period:
+The board (mock_device.board_logic: the firmware's C board logic) owns a ``Plant`` and,
+once per sample period:
 
-1. applies its outputs: ``set_torch``, ``set_ohmic_sense``, ``set_current_a``,
-   ``reset_breakaway`` and Z motion through ``plant.zaxis`` (``jog``/``move_to``/``stop``);
-   XY motion through ``plant.gantry`` (``feed_line``/``hold``/``resume``);
+1. applies its outputs: ``set_torch``, ``set_ohmic_sense``, ``set_current_a``, and Z
+   where its step generator has put it (``plant.zaxis.drive``; the axis also plans its own
+   moves, ``jog``/``move_to``/``stop``, for tests of the plant alone); an operator's
+   ``reset_breakaway``; XY motion through ``plant.gantry`` (``feed_line``/``hold``/``resume``);
 2. calls ``step(dt_s)``;
 3. reads ``measured_voltage_v()`` (the ADC sample of this period) and ``inputs()`` (an int
    bitmask, see ``InputBit``).

@@ -21,6 +21,7 @@ class ZState(enum.Enum):
     IDLE = "idle"
     MOVING = "moving"
     JOGGING = "jogging"
+    DRIVEN = "driven"  # by a step generator outside (the board's): see ``drive``
 
 
 class ZAxis:
@@ -130,6 +131,14 @@ class ZAxis:
         self._stopping = True
         self.state = ZState.JOGGING
 
+    def drive(self, position_mm: float, velocity_mm_s: float) -> None:
+        """Follow a step generator outside the axis (the board's, mock_device.board_logic):
+        the position it has stepped to and its rate. ``step`` leaves both alone; the axis is
+        idle while the rate is 0."""
+        self.position_mm = position_mm
+        self.velocity_mm_s = velocity_mm_s
+        self.state = ZState.IDLE if velocity_mm_s == 0.0 else ZState.DRIVEN
+
     def _brake_speed(self, distance_mm: float, dt_s: float) -> float:
         """Largest speed from which shedding accel·dt per step stops within ``distance``."""
         if distance_mm <= 0.0:
@@ -140,7 +149,7 @@ class ZAxis:
     def step(self, dt_s: float) -> None:
         """Advance the axis by ``dt_s`` seconds."""
         state = self.state
-        if state is ZState.IDLE:
+        if state is ZState.IDLE or state is ZState.DRIVEN:
             return
         v = self.velocity_mm_s
         pos = self.position_mm

@@ -91,7 +91,7 @@ def good_run(tmp_path_factory: pytest.TempPathFactory) -> SuiteRun:
 
 
 def test_good_firmware_passes_every_check(good_run: SuiteRun) -> None:
-    """Against the good mock firmware every check runs (reset by signal) and passes: exit 0."""
+    """Against the good mock board every check runs (reset by signal) and passes: exit 0."""
     assert good_run.returncode == EXIT_PASSED, good_run.stdout + good_run.stderr
     checks = good_run.checks()
     assert list(checks) == list(CHECK_NAMES)

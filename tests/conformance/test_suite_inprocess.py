@@ -17,7 +17,7 @@ from dthc_bridge.conformance.checks_telemetry import count_losses
 from dthc_bridge.conformance.context import InputRecord
 from dthc_bridge.conformance.errors import OutsideWindow
 from dthc_bridge.conformance.window import MotionWindow
-from mock_device.firmware import BoardIdentity
+from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from tests.link.board_harness import RealtimeSimBoard
 

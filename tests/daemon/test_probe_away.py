@@ -1,5 +1,6 @@
 """The daemon's probe away (G38.4/G38.5 on Z, protocol 1.2): BoardClient and the service's
-ProbeZ(away=True) against the mock firmware, ticking in real time behind a memory link."""
+ProbeZ(away=True) against the mock (the C board logic), ticking in real time behind a memory
+link."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from dthc_bridge.controller import actions as act
 from dthc_bridge.controller.plasma import PlasmaController
 from dthc_bridge.link import BoardTooOld, LinkSupervisor, LinkTiming, NegativeAck
 from dthc_bridge.service import ControllerService
-from mock_device.firmware import BoardIdentity
+from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from tests.link.board_harness import RealtimeSimBoard
 

@@ -39,7 +39,9 @@ NANO_FLASH_B = 30 * 1024  # 32 KB less a 2 KB bootloader
 
 @pytest.fixture(scope="module")
 def test_board(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_c_tests(SOURCES, tmp_path_factory.mktemp("fw") / "test_board")
+    # BOARD_CURRENT_OUT: the mock device's build option (SET_CURRENT applied), tested here.
+    exe = tmp_path_factory.mktemp("fw") / "test_board"
+    return build_c_tests(SOURCES, exe, "-DBOARD_CURRENT_OUT=1")
 
 
 def test_c_tests_are_listed() -> None:

@@ -18,7 +18,7 @@ from dthc_bridge.link import (
     LinkTiming,
     NegativeAck,
 )
-from mock_device.firmware import BoardIdentity
+from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from tests.transport.memory import LinkFaults
 
@@ -230,9 +230,15 @@ async def test_a_fault_latched_before_the_session_comes_from_status_not_reports(
 ) -> None:
     """A lease fault latched while unplugged is seen in the handshake STATUS; its 250 ms
     re-reports are history and are not passed on as new events."""
-    fw = rig.sim.board.firmware
-    fw.session = True
-    fw._latch(fp.FaultCode.LEASE_EXPIRED)
+    board = rig.sim.board
+    # A host that went away mid-job: a session, a 20 ms lease, ohmic sensing on (in use: the
+    # lapse latches), then silence. Its replies were never read.
+    board.send(fp.Hello(1, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, 1))
+    board.send(fp.SetLease(2, 20))
+    board.send(fp.OhmicSense(3, True))
+    board.advance_ms(30)
+    board.read()
+    assert board.firmware.faults & (1 << fp.FaultCode.LEASE_EXPIRED)
     reports: list[fp.Message] = []
     rig.supervisor.add_report_listener(lambda report, _t: reports.append(report))
     session = await rig.supervisor.wait_online(2.0)

@@ -269,7 +269,7 @@ def test_configure_out_of_range_names_the_field_and_changes_nothing(host: SimHos
     nak = host.request(fp.Configure(0, 1000, 0, 0, 0, 0, 0, 0.01))
     assert isinstance(nak, fp.Nak)
     assert (nak.code, nak.detail) == (NakCode.OUT_OF_RANGE, 1)
-    assert host.board.firmware.sampling.batch_size == fp.DEFAULT_BATCH_SIZE
+    assert host.board.firmware.batch_size == fp.DEFAULT_BATCH_SIZE
     assert isinstance(host.request(fp.Configure(0, 2000, 10, 0, 0, 0, 0, 0.01)), fp.Ack)
     host.received.clear()
     host.pump(20)
@@ -322,8 +322,9 @@ def test_same_seed_reproduces_the_same_run() -> None:
 
 def test_probe_reaching_z_min_reports_limit_without_a_fault(host: SimHost) -> None:
     """A probe that finds nothing above Z min ends with result LIMIT; no Z_LIMIT fault."""
-    host.open_session()
     host.board.plant.zaxis.min_mm = 25.0  # the plate (20 mm) is below the soft limit
+    host.board.reboot()  # the board reads its soft limits at power-on
+    host.open_session()
     host.request(fp.OhmicSense(0, True))
     ack = host.request(fp.ZProbe(0, 20_000, 60_000, InputMask.OHMIC))
     assert isinstance(ack, fp.Ack)

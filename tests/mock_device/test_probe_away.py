@@ -7,7 +7,7 @@ import pytest
 
 import firmware_protocol as fp
 from firmware_protocol import FaultCode, InputMask, NakCode
-from mock_device.firmware import BoardIdentity
+from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
 from mock_device.sim_host import SimHost
 
