@@ -284,9 +284,6 @@ class BoardClient:
     async def set_current(self, current_a: float) -> None:
         await self._ack(fp.SetCurrent(0, round(current_a * 10)))
 
-    async def z_stop(self) -> None:
-        await self._ack(fp.ZStop(0))
-
     async def fault_reset(self, mask: int = 0xFFFF) -> None:
         await self._ack(fp.FaultReset(0, mask))
 
