@@ -19,6 +19,7 @@ import pytest
 import serial
 
 from dthc_tools.demo import Stack, StackOptions
+from dthc_tools.demo.stack import StackResult
 from dthc_tools.demo.summary import summarize
 from dthc_tools.procs import die_with_parent
 
@@ -44,6 +45,7 @@ PROGRAM = [
 ]
 # Then a PlasmaC-form program on the same port: its dialect found from its own lines.
 PLASMAC = ["G21 G90", "G0 X20 Y60", "M3 $0 S1", "G1 X90 Y60 F2500", "M5 $0", "G0 X0 Y0", "M2"]
+TELEMETRY_HZ = StackOptions(Path()).telemetry_hz
 BUDGET = 120  # CNCjs's character-counting budget (grbl's 128 less a margin)
 
 
@@ -97,21 +99,8 @@ def stream(
 async def test_a_grbl_sender_cuts_a_masso_then_a_plasmac_program_through_the_port(
     tmp_path: Path,
 ) -> None:
-    options = StackOptions(tmp_path, broker="mosquitto", motion="grbl")
-    port = tmp_path / "grbl-port"
-    async with Stack(options) as stack:
-        log = (tmp_path / "grbl-port.log").open("w")
-        proc = await asyncio.to_thread(
-            _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
-        )
-        try:
-            answers, said = await asyncio.to_thread(stream, port, ["$$", *PROGRAM, *PLASMAC])
-        finally:
-            proc.terminate()
-            await asyncio.to_thread(proc.wait, 10)
-            log.close()
-        result = await stack.finish()
-    summary = summarize(result, options.telemetry_hz)
+    result, answers, said = await through_the_port(tmp_path, ["$$", *PROGRAM, *PLASMAC])
+    summary = summarize(result, TELEMETRY_HZ)
     assert answers == ["ok"] * (1 + len(PROGRAM) + len(PLASMAC)), (answers, said)
     assert "$110=" in said  # grbl's own settings, relayed as it wrote them
     assert "Grbl 1.1" in said  # the banner, after the reset
@@ -120,6 +109,25 @@ async def test_a_grbl_sender_cuts_a_masso_then_a_plasmac_program_through_the_por
     assert all(cut["arc_on_s"] > 0 for cut in summary["cuts"])
     assert summary["safety_violations"] == 0, summary["violations"]
     assert summary["torch_on_at_exit"] is False
+
+
+async def through_the_port(
+    workdir: Path, lines: list[str], *, hold_after: int | None = None
+) -> tuple[StackResult, list[str], str]:
+    """The stack with an emulated grbl, the port in front of it, ``lines`` streamed."""
+    port = workdir / "grbl-port"
+    async with Stack(StackOptions(workdir, broker="mosquitto", motion="grbl")) as stack:
+        log = (workdir / "grbl-port.log").open("w")
+        proc = await asyncio.to_thread(
+            _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
+        )
+        try:
+            answers, said = await asyncio.to_thread(stream, port, lines, hold_after=hold_after)
+        finally:
+            proc.terminate()
+            await asyncio.to_thread(proc.wait, 10)
+            log.close()
+        return await stack.finish(), answers, said
 
 
 def _start_port(port: Path, grbl: Path, broker_port: int, base: str, log: Any) -> Any:
@@ -144,22 +152,9 @@ async def test_a_feed_hold_mid_cut_puts_the_torch_out_and_cycle_start_relights(
 ) -> None:
     """! from the sender mid-cut: the daemon ends the cut (torch out, safe height), grbl
     holds; ~ 1.5 s later: the cut pierces again where the torch stands and finishes."""
-    options = StackOptions(tmp_path, broker="mosquitto", motion="grbl")
-    port = tmp_path / "grbl-port"
     program = ["G21 G90", "G0 X10 Y10", "M3", "G1 X150 Y10 F1500", "M5", "G0 X0 Y0", "M30"]
-    async with Stack(options) as stack:
-        log = (tmp_path / "grbl-port.log").open("w")
-        proc = await asyncio.to_thread(
-            _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
-        )
-        try:
-            answers, said = await asyncio.to_thread(stream, port, program, hold_after=4)
-        finally:
-            proc.terminate()
-            await asyncio.to_thread(proc.wait, 10)
-            log.close()
-        result = await stack.finish()
-    summary = summarize(result, options.telemetry_hz)
+    result, answers, said = await through_the_port(tmp_path, program, hold_after=4)
+    summary = summarize(result, TELEMETRY_HZ)
     assert answers == ["ok"] * len(program), (answers, said)
     spans = result.mock_exit["cuts"]
     assert len(spans) == 2, spans  # the cut, then the same cut pierced again after the hold

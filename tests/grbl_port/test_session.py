@@ -11,44 +11,33 @@ from typing import Any
 from dthc_tools.grbl_port.session import BANNER, PortSession
 from dthc_tools.sender import Sender
 
-from ..sender.test_sender_lines import FakeBackend
+from ..sender.test_sender_lines import FakeBackend, FakeDaemon
 
 
-class Daemon:
-    """Answers every request; an M3 only once ``xy_may_move`` is set."""
+class Daemon(FakeDaemon):
+    """The sender tests' daemon; an M3 answered only once ``xy_may_move`` is set, its
+    status ``state``, and a thc_hold that ends a lit cut when ``cut_ended_on_hold``."""
 
     def __init__(self) -> None:
-        self.lines: list[str] = []
-        self.requests: list[str] = []
+        super().__init__()
         self.xy_may_move = asyncio.Event()
         self.state = "idle"
         self.cut_ended_on_hold = False
 
     async def request(self, name: str, /, **args: Any) -> dict[str, Any]:
-        self.requests.append(name)
         if name == "status":
+            self.requests.append(name)
             return {"state": self.state}
         if name == "thc_hold" and args.get("on") and self.cut_ended_on_hold:
+            self.requests.append(name)
             return {"cut_ended": True}  # the daemon put the torch out for the pause
-        return {"dialect": "masso", "codes": {}} if name == "program_start" else {}
+        return await super().request(name, **args)
 
-    async def gcode(self, line: str, **_: Any) -> dict[str, Any]:
-        self.lines.append(line)
+    async def gcode(self, line: str, **args: Any) -> dict[str, Any]:
+        answer = await super().gcode(line, **args)
         if line.startswith("M3"):
             await self.xy_may_move.wait()
-        return {}
-
-    async def notify(self, name: str, /, **args: Any) -> None:
-        pass
-
-    def on_event(self, handler: Callable[[dict[str, Any]], None]) -> None:
-        pass
-
-    def on_offline(self, handler: Callable[[], None]) -> None:
-        pass
-
-    def on_telemetry(self, handler: Callable[[dict[str, Any]], None]) -> None:
-        pass
+        return answer
 
 
 class Grbl(FakeBackend):
