@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from dthc_bridge.logs import configure_logging, logging_configured
 
-from . import codec, control, faults, fuzz, latency, panel_slow, scale, soak
+from . import codec, control, faults, fuzz, grbl_port, latency, panel_slow, scale, soak
 from .report import print_report, report_header
 
 __all__ = ["SUITES", "Suite", "build_parser", "main", "run_suite"]
@@ -88,6 +88,12 @@ SUITES: dict[str, Suite] = {
             "K daemons and K mock boards on one broker: CPU per table, broker message rate",
             scale.add_arguments,
             scale.run,
+        ),
+        Suite(
+            "port",
+            "the grbl port: what it adds to a line's answer against a bare grbl, in one run",
+            grbl_port.add_arguments,
+            grbl_port.run,
         ),
         Suite(
             "panel",

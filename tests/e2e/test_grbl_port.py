@@ -10,10 +10,8 @@ pierce; the torch is never lit outside a cut (the plant's violations)."""
 from __future__ import annotations
 
 import asyncio
-import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import pytest
 import serial
@@ -21,7 +19,7 @@ import serial
 from dthc_tools.demo import Stack, StackOptions
 from dthc_tools.demo.stack import StackResult
 from dthc_tools.demo.summary import summarize
-from dthc_tools.procs import die_with_parent
+from dthc_tools.grbl_port.process import start_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
@@ -119,7 +117,7 @@ async def through_the_port(
     async with Stack(StackOptions(workdir, broker="mosquitto", motion="grbl")) as stack:
         log = (workdir / "grbl-port.log").open("w")
         proc = await asyncio.to_thread(
-            _start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
+            start_port, port, stack.grbl_pty, stack.broker.port, stack.base, log
         )
         try:
             answers, said = await asyncio.to_thread(stream, port, lines, hold_after=hold_after)
@@ -128,36 +126,3 @@ async def through_the_port(
             await asyncio.to_thread(proc.wait, 10)
             log.close()
         return await stack.finish(), answers, said
-
-
-def _start_port(port: Path, grbl: Path, broker_port: int, base: str, log: Any) -> Any:
-    import subprocess
-
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "dthc_bridge", "grbl-port", "--listen", str(port),
-         "--grbl", str(grbl), "--broker", f"mqtt://127.0.0.1:{broker_port}",
-         "--base-topic", base],
-        stdout=log, stderr=log, preexec_fn=die_with_parent(),
-    )  # fmt: skip
-    deadline = time.monotonic() + 20.0
-    while not port.exists():
-        if proc.poll() is not None or time.monotonic() > deadline:
-            raise RuntimeError(f"the grbl port did not start: see {log.name}")
-        time.sleep(0.05)
-    return proc
-
-
-async def test_a_feed_hold_mid_cut_puts_the_torch_out_and_cycle_start_relights(
-    tmp_path: Path,
-) -> None:
-    """! from the sender mid-cut: the daemon ends the cut (torch out, safe height), grbl
-    holds; ~ 1.5 s later: the cut pierces again where the torch stands and finishes."""
-    program = ["G21 G90", "G0 X10 Y10", "M3", "G1 X150 Y10 F1500", "M5", "G0 X0 Y0", "M30"]
-    result, answers, said = await through_the_port(tmp_path, program, hold_after=4)
-    summary = summarize(result, TELEMETRY_HZ)
-    assert answers == ["ok"] * len(program), (answers, said)
-    spans = result.mock_exit["cuts"]
-    assert len(spans) == 2, spans  # the cut, then the same cut pierced again after the hold
-    assert spans[1]["start_t_s"] - (spans[0]["start_t_s"] + spans[0]["duration_s"]) > 1.0
-    assert summary["safety_violations"] == 0, summary["violations"]
-    assert summary["torch_on_at_exit"] is False
