@@ -148,6 +148,24 @@ def test_latency_suite_short_run_as_a_module() -> None:
     }  # fmt: skip
 
 
+@pytest.mark.slow
+def test_port_suite_times_both_kinds_of_line_through_the_port_and_bare() -> None:
+    """``bench port --lines 20``: a bare grbl and the port in one run, each kind timed."""
+    done = subprocess.run(
+        [sys.executable, "-m", "dthc_tools.bench", "port", "--json", "--lines", "20"],
+        capture_output=True, text=True, timeout=120, check=False, preexec_fn=die_with_parent(),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report.keys() >= HEADER
+    for kind in ("modal", "feed"):
+        figures = report[kind]
+        assert figures["bare_us"]["n"] == figures["port_us"]["n"] == 20
+        assert 0 < figures["bare_us"]["p50"] <= figures["bare_us"]["p99"]
+        assert figures["ratio_p50"] > 0
+    assert "port_added_p99_ms_modal" in report["goals"]
+
+
 def test_programs_split_into_cuts_with_a_slow_down_at_the_end() -> None:
     plans = plan_cuts(
         ["G21 G90", "G0 X50 Y100", "G1 X450 Y100 F5500", "G0 X450 Y200", "G1 X50 Y200"]
