@@ -6,6 +6,7 @@ import argparse
 import json
 import subprocess
 import sys
+from typing import Any
 
 import pytest
 
@@ -101,16 +102,23 @@ def test_text_output_is_a_table(capsys: pytest.CaptureFixture[str]) -> None:
     assert "goal rms_ratio_every_scenario" in out
 
 
+def run_module(timeout_s: float, suite: str, *argv: str) -> dict[str, Any]:
+    """``python -m dthc_tools.bench SUITE --json ARGV`` in its own process: its report."""
+    done = subprocess.run(
+        [sys.executable, "-m", "dthc_tools.bench", suite, "--json", *argv],
+        capture_output=True, text=True, timeout=timeout_s, check=False,
+        preexec_fn=die_with_parent(),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    report: dict[str, Any] = json.loads(done.stdout)
+    assert report.keys() >= HEADER
+    return report
+
+
 @pytest.mark.slow
 def test_latency_suite_short_run_as_a_module() -> None:
     """``python -m dthc_tools.bench latency --json --duration 2``: mock on a pty and in-process."""
-    done = subprocess.run(
-        [sys.executable, "-m", "dthc_tools.bench", "latency", "--json", "--duration", "2"],
-        capture_output=True, text=True, timeout=55, check=False, preexec_fn=die_with_parent(),
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
-    assert report.keys() >= HEADER
+    report = run_module(55, "latency", "--duration", "2")
     pty = report["pty"]
     assert pty["batches"] >= 1500
     assert pty["answered_batches"] == pty["batches"]
@@ -151,13 +159,7 @@ def test_latency_suite_short_run_as_a_module() -> None:
 @pytest.mark.slow
 def test_port_suite_times_both_kinds_of_line_through_the_port_and_bare() -> None:
     """``bench port --lines 20``: a bare grbl and the port in one run, each kind timed."""
-    done = subprocess.run(
-        [sys.executable, "-m", "dthc_tools.bench", "port", "--json", "--lines", "20"],
-        capture_output=True, text=True, timeout=120, check=False, preexec_fn=die_with_parent(),
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    report = json.loads(done.stdout)
-    assert report.keys() >= HEADER
+    report = run_module(120, "port", "--lines", "20")
     for kind in ("modal", "feed"):
         figures = report[kind]
         assert figures["bare_us"]["n"] == figures["port_us"]["n"] == 20
