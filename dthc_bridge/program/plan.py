@@ -233,6 +233,8 @@ class ProgramPlan:
         self._dialect_found = False  # a streamed plan has found its dialect in the lines
         self._probed = False  # a probe ran (G38.x/G31)
         self._touched_off = False  # ... and the program set its Z origin after it
+        self._stopped_by_probe_down = False  # Z rests where a probe down stopped (G38.2)
+        self._warned_zero_at_switch = False
 
     # --- program parameters ----------------------------------------------------------------
 
@@ -395,8 +397,14 @@ class ProgramPlan:
                 "would stay on the work after this probe and M3 would refuse to start: M3 "
                 "touches off by itself (remove the probe), or set #<keep-z-motion> = 1 to run "
                 "the program's own Z moves")  # fmt: skip
+        if origin and self._stopped_by_probe_down:
+            self._warn_zero_at_the_switch(number, words)
         self._probed = self._probed or bool(probe)
         self._touched_off = self._touched_off or (origin and self._probed)
+        if probe or origin:
+            self._stopped_by_probe_down = bool(probe) and not probe & {38.4, 38.5}
+        elif any(w.letter == "Z" for w in words):
+            self._stopped_by_probe_down = False  # Z moved on from where the probe stopped
         if probe or origin or 92.1 in gs:
             yield from self._board_z_line(number, here, words, bool(probe))
             return
@@ -415,6 +423,22 @@ class ProgramPlan:
         daemon will parse it."""
         parsed = parse_line(line, line_number=number, dialect=self.dialect)
         return DaemonStep(line, number, here, parsed, feed_note=feed_note)
+
+    def _warn_zero_at_the_switch(self, number: int, words: Sequence[Word]) -> None:
+        """``G92 Z0`` right where a probe down stopped: on a float switch that is its travel
+        below the surface, so every height after it is that much lower (a post for an ohmic
+        probe needs no offset; one that knows its switch writes it: ``G92 Z-1.5``). A
+        warning, not a refusal: the table may probe ohmically."""
+        z = next(w for w in words if w.letter == "Z")
+        if z.value != 0.0 or self._warned_zero_at_switch:
+            return
+        self._warned_zero_at_switch = True
+        self.warnings.append(
+            f"line {number}: Z0 set where the probe stopped; a float switch stops the probe "
+            "its travel (controller.float_travel_mm) below the surface, so the program's "
+            "heights are that much lower unless it probes ohmically (set the origin to minus "
+            "the travel, e.g. G92 Z-1.5)"
+        )
 
     def _mapped(self, text: str) -> str:
         if not self._codes:

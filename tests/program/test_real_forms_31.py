@@ -124,3 +124,19 @@ def test_a_tube_cut_waits_its_pierce_delay_before_xy_moves() -> None:
     assert loop.sequence.cut.arc_ok_since is not None
     assert loop.now - loop.sequence.cut.arc_ok_since >= 0.5  # the pierce delay, then M3
     assert loop.now - before >= 0.5
+
+
+def test_a_zero_origin_where_a_probe_down_stopped_is_warned_once_and_an_offset_is_not() -> None:
+    """A generic grbl post: G38.2 then G92 Z0. On a float switch Z0 is then the switch's
+    travel below the surface and every height lower by it (the demo cut at 0 mm): the check
+    says so, once; with the offset written, or after a Z move, it says nothing."""
+    body = ["G21 G90", "G38.2 Z-30 F250", "G92 Z0", "G0 Z3.5", "M3", "G1 X50 F2000", "M5"]
+    warned = check_program(body, dialect=Dialect.RELAY)
+    assert warned.ok
+    said = [w for w in warned.warnings if "Z0 set where the probe stopped" in w]
+    assert len(said) == 1
+    assert said[0].startswith("line 3:")
+    offset = check_program([*body[:2], "G92 Z-1.5", *body[3:]], dialect=Dialect.RELAY)
+    assert not [w for w in offset.warnings if "probe stopped" in w]
+    moved = check_program([*body[:2], "G0 Z5", "G92 Z0", *body[3:]], dialect=Dialect.RELAY)
+    assert not [w for w in moved.warnings if "probe stopped" in w]
