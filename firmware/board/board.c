@@ -194,8 +194,13 @@ static bool board_at_rest(void)
  * sensing on or start Z, and every valid frame renews the lease before it is executed. */
 static void check_lease(void)
 {
+    /* Both ends of the lease on one clock, hal_time_us: the frame's arrival is stamped on
+     * it, so "now" is read from it too, not from the tick's schedule. The two are kept by
+     * different counters of one timer on the AVR (overflows, compare schedule) and agree on
+     * a real MCU; simavr 1.6 can drop a Timer1 overflow when OCR1A is written in the cycle
+     * it falls due, which left them 32.768 ms apart and the lease that much short. */
     if (!B.session || B.lease != LEASE_RUNNING
-        || (int32_t)(B.now_us - B.last_rx_us) <= (int32_t)B.lease_ms * 1000) {
+        || (int32_t)(hal_time_us() - B.last_rx_us) <= (int32_t)B.lease_ms * 1000) {
         return;
     }
     if (board_at_rest()) {

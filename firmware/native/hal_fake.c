@@ -24,7 +24,7 @@ void fake_rx(const uint8_t *data, unsigned n)
     }
     memcpy(F.rx + F.rx_len, data, n);
     for (unsigned i = 0; i < n; i++) {
-        F.rx_at_us[F.rx_len + i] = (uint32_t)F.now_us;
+        F.rx_at_us[F.rx_len + i] = (uint32_t)F.now_us - F.clock_lag_us; /* hal_time_us */
     }
     F.rx_len += n;
 }
@@ -62,12 +62,12 @@ void fake_run_us(uint32_t us)
 
 uint32_t hal_time_us(void)
 {
-    return (uint32_t)F.now_us;
+    return (uint32_t)F.now_us - F.clock_lag_us;
 }
 
 uint64_t hal_time_us64(void)
 {
-    return F.now_us;
+    return F.now_us - F.clock_lag_us;
 }
 
 void hal_tick_set_period_us(uint16_t period_us)

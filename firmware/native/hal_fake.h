@@ -6,7 +6,8 @@
 #include <stdint.h>
 
 typedef struct {
-    uint64_t now_us;       /* the clock hal_time_us reads */
+    uint64_t now_us;       /* the clock hal_time_us reads (less clock_lag_us) and ticks run on */
+    uint32_t clock_lag_us; /* hal_time_us behind the tick schedule (a lost timer overflow) */
     uint32_t next_tick_us; /* the scheduled time of the next tick */
     uint16_t period_us;
     int tick_locked;
