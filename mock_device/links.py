@@ -64,6 +64,11 @@ class PtyLink(BoardLink):
         tmp.replace(self.path)  # atomic: the path never points at a dead pty
         asyncio.get_running_loop().add_reader(master, self._readable)
 
+    @property
+    def device(self) -> str | None:
+        """The pty's device (/dev/pts/N) while open."""
+        return os.ttyname(self._slave) if self._slave is not None else None
+
     def _readable(self) -> None:
         assert self._master is not None
         try:

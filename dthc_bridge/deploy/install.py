@@ -30,6 +30,7 @@ from typing import TextIO
 
 import dthc_bridge
 
+from ..mqtt.roles import Role
 from .actions import (
     Command,
     Context,
@@ -45,6 +46,7 @@ from .actions import (
 )
 from .broker import (
     BROKER_GROUP,
+    BROKER_USERS,
     DEBIAN_INCLUDE_DIR,
     BrokerOptions,
     BrokerTls,
@@ -53,16 +55,19 @@ from .broker import (
     client_notes,
     daemon_mqtt_keys,
     existing_config_notes,
+    password_path,
     set_mqtt_keys,
     validated_topics,
 )
 from .render import (
     BOARD_SYMLINK,
+    DEFAULT_GRBL_LISTEN,
     DEFAULT_PID,
     DEFAULT_VID,
     BoardIds,
     DeployError,
     example_config,
+    render_port_unit,
     render_udev_rules,
     render_unit,
     validate_account_name,
@@ -72,6 +77,8 @@ __all__ = [
     "CONFIG_DIR",
     "CONFIG_PATH",
     "DEFAULT_USER",
+    "PORT_UNIT_NAME",
+    "PORT_UNIT_PATH",
     "RULES_PATH",
     "STATE_DIR",
     "UNIT_NAME",
@@ -91,6 +98,8 @@ __all__ = [
 
 UNIT_NAME = "dthc-bridge.service"
 UNIT_PATH = f"/etc/systemd/system/{UNIT_NAME}"
+PORT_UNIT_NAME = "dthc-grbl-port.service"
+PORT_UNIT_PATH = f"/etc/systemd/system/{PORT_UNIT_NAME}"
 RULES_PATH = "/etc/udev/rules.d/99-dthc.rules"
 CONFIG_DIR = "/etc/dthc-bridge"
 CONFIG_PATH = f"{CONFIG_DIR}/config.toml"
@@ -126,6 +135,10 @@ class InstallOptions:
     """The topics' base; None: the existing configuration's, else "dthc"."""
     board_id: str | None = None
     """None: the existing configuration's, else "table1"."""
+    grbl: str | None = None
+    """``--grbl``: the table's grbl; the grbl port's unit is installed in front of it."""
+    grbl_listen: str = DEFAULT_GRBL_LISTEN
+    """Where a sender opens the grbl port."""
 
 
 @dataclass(frozen=True)
@@ -181,7 +194,8 @@ def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
     unit = render_unit(bin_dir=options.bin_dir, user=user, group=group)
     rules = render_udev_rules(options.board, group=group)
     existing = _read_config(options.root)
-    topics = validated_topics(*_topics_of(options, existing))
+    base_topic, board_id = _topics_of(options, existing)
+    topics = validated_topics(base_topic, board_id)
     config = example_config()
     config_keys: dict[str, str | int] = {}
     if options.base_topic is not None:
@@ -210,6 +224,15 @@ def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
             broker_group_exists=host.broker_group_exists,
             broker_installed=host.broker_installed,
         )
+    units = [(UNIT_NAME, UNIT_PATH)]
+    if options.grbl is not None:
+        port_unit = render_port_unit(
+            bin_dir=options.bin_dir, user=user, group=group, grbl=options.grbl,
+            listen=options.grbl_listen, base_topic=base_topic, board_id=board_id,
+            broker_args=_sender_login(options.broker),
+        )  # fmt: skip
+        steps.append(WriteFile(PORT_UNIT_PATH, port_unit, 0o644))
+        units.append((PORT_UNIT_NAME, PORT_UNIT_PATH))
     steps += [
         Command(("udevadm", "control", "--reload"), "udev", if_changed=(RULES_PATH,)),
         Command(
@@ -217,16 +240,45 @@ def plan_install(options: InstallOptions, host: HostState) -> list[Step]:
             "udev",
             if_changed=(RULES_PATH,),
         ),
-        Command(("systemctl", "daemon-reload"), "systemd", if_changed=(UNIT_PATH,)),
-        Command(("systemctl", "enable", UNIT_NAME), "systemd"),
+        Command(("systemctl", "daemon-reload"), "systemd", if_changed=tuple(p for _, p in units)),
+        *(Command(("systemctl", "enable", name), "systemd") for name, _ in units),
     ]
-    if options.start:
-        steps.append(StartService(UNIT_NAME, restart_if_changed=(UNIT_PATH,)))
-    else:
-        steps.append(Note(f"not started (--no-start): systemctl start {UNIT_NAME}"))
+    for name, path in units:
+        if options.start:
+            steps.append(StartService(name, restart_if_changed=(path,)))
+        else:
+            steps.append(Note(f"not started (--no-start): systemctl start {name}"))
+    if options.grbl is not None:
+        steps.append(
+            Note(
+                f"grbl senders: open {options.grbl_listen} as a grbl serial port (CNCjs: a "
+                '"ports" entry in ~/.cncrc; UGS, bCNC: type the path); the user running the '
+                "sender must be in group dialout"
+            )
+        )
     if options.broker is not None:
         steps += client_notes(options.broker)
     return steps
+
+
+def _sender_login(broker: BrokerOptions | None) -> tuple[str, ...]:
+    """The grbl port's broker options: the sender role's login on the broker this install
+    configured (the port lights the torch as a sender does); none for a broker it did not
+    configure (the port's default, mqtt://localhost:1883, or a drop-in)."""
+    if broker is None:
+        return ()
+    keys = daemon_mqtt_keys(broker)
+    scheme = "mqtts" if "tls.ca_file" in keys else "mqtt"
+    host = str(keys.get("host", "localhost"))
+    host = f"[{host}]" if ":" in host else host
+    port = keys.get("port", 8883 if scheme == "mqtts" else 1883)
+    args: tuple[str, ...] = (
+        "--broker", f"{scheme}://{BROKER_USERS[Role.SENDER]}@{host}:{port}",
+        "--broker-password-file", password_path(Role.SENDER),
+    )  # fmt: skip
+    if "tls.ca_file" in keys:
+        args += ("--broker-ca-file", str(keys["tls.ca_file"]))
+    return args
 
 
 def _read_config(root: Path) -> dict[str, object] | None:
@@ -364,10 +416,14 @@ def plan_uninstall(options: UninstallOptions, host: HostState) -> list[Step]:
     """Every step of an uninstallation, in order (pure)."""
     user = validate_account_name(options.user)
     steps: list[Step] = [
+        Command(
+            ("systemctl", "disable", "--now", PORT_UNIT_NAME), "systemd", if_exists=PORT_UNIT_PATH
+        ),
+        RemoveFile(PORT_UNIT_PATH),
         Command(("systemctl", "disable", "--now", UNIT_NAME), "systemd", if_exists=UNIT_PATH),
         RemoveFile(UNIT_PATH),
         RemoveFile(RULES_PATH),
-        Command(("systemctl", "daemon-reload"), "systemd", if_changed=(UNIT_PATH,)),
+        Command(("systemctl", "daemon-reload"), "systemd", if_changed=(UNIT_PATH, PORT_UNIT_PATH)),
         Command(("udevadm", "control", "--reload"), "udev", if_changed=(RULES_PATH,)),
     ]
     if not options.purge:
@@ -441,6 +497,15 @@ def add_install_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="this table's id in its topics (default: the config's, else \"table1\")",
     )
+    parser.add_argument(
+        "--grbl", default=None, metavar="DEVICE",
+        help="the table's grbl (/dev/ttyUSB0, socket://HOST:PORT): also install the grbl port "
+        "(dthc-grbl-port.service), so the owner's grbl sender keeps working",
+    )  # fmt: skip
+    parser.add_argument(
+        "--grbl-listen", default=DEFAULT_GRBL_LISTEN, metavar="PATH",
+        help=f"where a sender opens the grbl port (default {DEFAULT_GRBL_LISTEN})",
+    )  # fmt: skip
     broker = parser.add_argument_group(
         "broker",
         "write mosquitto's configuration, password file and ACL for this table: a user per "
@@ -512,6 +577,8 @@ def run_install(args: argparse.Namespace) -> int:
         broker=broker,
         base_topic=args.base_topic,
         board_id=args.board_id,
+        grbl=args.grbl,
+        grbl_listen=args.grbl_listen,
     )
     return install_service(options)
 

@@ -14,8 +14,10 @@ from pathlib import Path
 __all__ = [
     "BOARD_SYMLINK",
     "CONFIG_TEMPLATE",
+    "DEFAULT_GRBL_LISTEN",
     "DEFAULT_PID",
     "DEFAULT_VID",
+    "PORT_UNIT_TEMPLATE",
     "RULES_TEMPLATE",
     "UNIT_TEMPLATE",
     "BoardIds",
@@ -23,6 +25,7 @@ __all__ = [
     "example_config",
     "load_template",
     "render",
+    "render_port_unit",
     "render_udev_rules",
     "render_unit",
     "validate_account_name",
@@ -31,6 +34,9 @@ __all__ = [
 UNIT_TEMPLATE = "dthc-bridge.service"
 RULES_TEMPLATE = "99-dthc.rules"
 CONFIG_TEMPLATE = "config.example.toml"
+PORT_UNIT_TEMPLATE = "dthc-grbl-port.service"
+DEFAULT_GRBL_LISTEN = "/run/dthc-grbl-port/grbl"
+"""The grbl port's stable path for a sender (in the port unit's RuntimeDirectory)."""
 
 DEFAULT_VID = "1209"
 """pid.codes' vendor id: the board's ids are placeholders until its firmware has real ones."""
@@ -53,6 +59,13 @@ _ACCOUNT = re.compile(r"[a-z_][a-z0-9_-]{0,31}")
 _SERIAL = re.compile(r"[!#&'()+,\-./0-9:;<=>@A-Z^_`a-z{}~]{1,126}")
 # A path systemd takes literally in ExecStart= (no specifiers, variables, quoting).
 _UNIT_PATH = re.compile(r"/[A-Za-z0-9_./+-]*")
+# The table's grbl and the port's listener, as grbl-port takes them: a device path, or
+# socket://HOST:PORT / tcp://HOST:PORT (nothing systemd would reinterpret in ExecStart=).
+_UNIT_ENDPOINT = re.compile(
+    r"(?:/[A-Za-z0-9_./+-]*|(?:socket|tcp)://[A-Za-z0-9_.:\[\]-]+:[0-9]{1,5})"
+)
+_TOPIC_WORD = re.compile(r"[A-Za-z0-9_.-]+")
+_BROKER_ARG = re.compile(r"[A-Za-z0-9_@:/.+\[\]-]+")
 
 
 class DeployError(Exception):
@@ -118,18 +131,58 @@ def render(template: str, values: Mapping[str, str]) -> str:
 
 def render_unit(*, bin_dir: Path, user: str, group: str) -> str:
     """The service unit for a daemon installed in ``bin_dir``, run as ``user``:``group``."""
+    return render(load_template(UNIT_TEMPLATE), _service_values(bin_dir, user, group))
+
+
+def _service_values(bin_dir: Path, user: str, group: str) -> dict[str, str]:
+    """A unit's BIN_DIR, USER and GROUP, each checked."""
     text = str(bin_dir)
     if _UNIT_PATH.fullmatch(text) is None:
         raise DeployError(
             f"--bin-dir {text!r}: must be an absolute path of letters, digits and _ . / + - "
             "(systemd would interpret spaces, quotes, % and $ in ExecStart=)"
         )
-    values = {
+    return {
         "BIN_DIR": text.rstrip("/") or "/",
         "USER": validate_account_name(user),
         "GROUP": validate_account_name(group),
     }
-    return render(load_template(UNIT_TEMPLATE), values)
+
+
+def render_port_unit(
+    *,
+    bin_dir: Path,
+    user: str,
+    group: str,
+    grbl: str,
+    listen: str = DEFAULT_GRBL_LISTEN,
+    base_topic: str = "dthc",
+    board_id: str = "table1",
+    broker_args: tuple[str, ...] = (),
+) -> str:
+    """The grbl port's unit: ``dthc-bridge grbl-port`` in front of ``grbl`` (the table's
+    grbl), listening for a sender on ``listen``, logged in with ``broker_args``."""
+    for option, text in (("--grbl", grbl), ("--grbl-listen", listen)):
+        if _UNIT_ENDPOINT.fullmatch(text) is None:
+            raise DeployError(
+                f"{option} {text!r}: expected a device path (/dev/ttyUSB0) or "
+                "socket://HOST:PORT, without spaces, quotes, % or $"
+            )
+    for option, text in (("--base-topic", base_topic), ("--board-id", board_id)):
+        if _TOPIC_WORD.fullmatch(text) is None:
+            raise DeployError(f"{option} {text!r}: expected letters, digits, _ . -")
+    for arg in broker_args:
+        if _BROKER_ARG.fullmatch(arg) is None:
+            raise DeployError(f"broker argument {arg!r}: systemd would reinterpret it")
+    values = {
+        **_service_values(bin_dir, user, group),
+        "GRBL": grbl,
+        "LISTEN": listen,
+        "BASE_TOPIC": base_topic,
+        "BOARD_ID": board_id,
+        "BROKER_ARGS": " ".join(broker_args),
+    }
+    return render(load_template(PORT_UNIT_TEMPLATE), values)
 
 
 def render_udev_rules(board: BoardIds, *, group: str) -> str:

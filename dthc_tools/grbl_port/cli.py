@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import grp
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,7 +30,9 @@ from ..sender.backend import BackendError
 from ..sender.grbl_backend import GrblBackend
 from .session import BANNER, PortSession
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "share_pty"]
+
+DEFAULT_PTY_GROUP = "dialout"  # Debian's group of serial ports: senders' users are in it
 
 
 def build_parser(prog: str = "dthc-bridge grbl-port") -> argparse.ArgumentParser:
@@ -44,6 +48,12 @@ def build_parser(prog: str = "dthc-bridge grbl-port") -> argparse.ArgumentParser
     parser.add_argument(
         "--grbl", required=True, help="the table's grbl: /dev/ttyUSB0, or socket://HOST:PORT"
     )
+    parser.add_argument(
+        "--pty-group", default=DEFAULT_PTY_GROUP, metavar="GROUP",
+        help="the group given the pty (mode 0660) so a sender running as another user in it "
+        f"opens it like a serial port (default {DEFAULT_PTY_GROUP}, where it exists; '' to "
+        "leave the pty its owner's)",
+    )  # fmt: skip
     parser.add_argument("--baud", type=int, default=115_200)
     parser.add_argument("--status-hz", type=float, default=10.0, help="grbl polling, 5-20 Hz")
     parser.add_argument("--base-topic", default="dthc")
@@ -82,6 +92,8 @@ async def _serve(args: argparse.Namespace) -> int:
             link = _link(args.listen, session)
             ends.append(link)
             await link.open()
+            if isinstance(link, PtyLink) and args.pty_group:
+                share_pty(link, args.pty_group)
             link.write(BANNER.encode() + b"\r\n")  # read by a sender when it opens the port
             print(f"grbl port on {args.listen}, table's grbl on {args.grbl}", file=sys.stderr)
             try:
@@ -91,6 +103,30 @@ async def _serve(args: argparse.Namespace) -> int:
     finally:
         await grbl.close()
     return 0
+
+
+def share_pty(link: PtyLink, group: str) -> None:
+    """The pty's device to ``group``, mode 0660, as a USB-serial port is: a sender running
+    as another user of that group opens it. A group that does not exist, or one this user
+    may not give (not a member): the pty stays its owner's, said once on stderr."""
+    device = link.device
+    if device is None:
+        return
+    try:
+        gid = grp.getgrnam(group).gr_gid
+    except KeyError:
+        if group != DEFAULT_PTY_GROUP:
+            print(f"--pty-group {group!r}: no such group; the pty stays yours", file=sys.stderr)
+        return
+    try:
+        os.chown(device, -1, gid)
+        os.chmod(device, 0o660)
+    except PermissionError:
+        print(
+            f"the pty {device} stays yours: this user may not give it to group {group!r} "
+            "(not a member); a sender running as you opens it",
+            file=sys.stderr,
+        )
 
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge grbl-port") -> int:
