@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware board-lib cc-tools codegen clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware board-lib cc-tools codegen cncjs clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -30,6 +30,23 @@ browser:
 	  echo "installing chromium and chromium-driver (apt-get)"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver >/dev/null; }
+
+# The grbl port is tested with a real grbl sender: CNCjs from the npm registry (its serial
+# module ships prebuilt; nothing compiles), at the versions of tests/e2e/cncjs's lock file,
+# in a cache folder outside the checkout (about 230 MB, 40 s once). Node.js and npm from
+# Debian where missing. Reinstalled when the lock file changes.
+CNCJS_DIR ?= $(or $(XDG_CACHE_HOME),$(HOME)/.cache)/dthc-bridge/cncjs
+export CNCJS_DIR
+cncjs:
+	@{ command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1; } || { \
+	  echo "installing nodejs and npm (apt-get)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq nodejs npm >/dev/null; }
+	@cmp -s tests/e2e/cncjs/package-lock.json "$(CNCJS_DIR)/package-lock.json" && \
+	  test -x "$(CNCJS_DIR)/node_modules/cncjs/bin/cncjs" || { \
+	  echo "installing CNCjs from the npm registry into $(CNCJS_DIR)"; \
+	  mkdir -p "$(CNCJS_DIR)" && cp tests/e2e/cncjs/package.json tests/e2e/cncjs/package-lock.json "$(CNCJS_DIR)/" && \
+	  npm ci --prefix "$(CNCJS_DIR)" --no-audit --no-fund --loglevel=error; }
 
 # Unit checks run systemd-analyze on the service file; install it where it is missing.
 systemd-tools:
@@ -87,7 +104,7 @@ typecheck: $(STAMP)
 unit: $(STAMP) board-lib
 	$(BIN)/pytest -q -n 2 --dist loadfile
 
-test: $(STAMP) broker browser systemd-tools firmware lint typecheck unit
+test: $(STAMP) broker browser systemd-tools cncjs firmware lint typecheck unit
 
 bench: $(STAMP) board-lib
 	for suite in codec control latency soak faults fuzz scale; do $(BIN)/dthc-bridge bench $$suite --json; done
