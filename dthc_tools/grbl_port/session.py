@@ -21,7 +21,11 @@ its real-time bytes acted on at once.
   happened). Override bytes (0x80 and up): passed to grbl.
 
 - ``$`` lines (``$$``, ``$I``, ``$G``, ``$H``, ``$X``, ``$J=``): to grbl as written, its
-  output and answer back; a jog is refused (``error:8``) while a cut is lit.
+  output and answer back; a jog is refused (``error:8``) while a cut is lit. The receive
+  buffer a sender is told of is the port's own, not grbl's: ``$I``'s ``[OPT:...]`` and a
+  report's ``Bf:`` give :data:`RX_BUFFER_BYTES`, less the bytes of the lines received and
+  not yet answered (a sender counting characters against grbl's figure would stream past
+  lines the port holds behind an ``M3``).
 
 The dialect: the one given, else detected from the lines as they come (the daemon's
 ``controller.dialect`` until a line shows one).
@@ -47,7 +51,7 @@ from ..sender.daemon_client import DaemonError
 from ..sender.sender import Sender
 from .receiver import Line, RealTime, Receiver
 
-__all__ = ["PortBackend", "PortSession"]
+__all__ = ["RX_BUFFER_BYTES", "PortBackend", "PortSession"]
 
 log = structlog.get_logger("dthc_tools.grbl_port")
 
@@ -57,6 +61,7 @@ LINE_OVERFLOW = 11  # grbl's "max characters per line exceeded"
 NOT_IDLE = 8  # grbl's "'$' command cannot be used unless grbl is idle"
 LIT = frozenset(str(state) for state in IN_A_CUT)  # the daemon's states with a cut on
 BANNER = "Grbl 1.1h ['$' for help]"
+RX_BUFFER_BYTES = 128  # grbl 1.1's: a sender's window stays as short as with a bare grbl
 
 
 class PortBackend(MotionBackend, Protocol):
@@ -94,6 +99,7 @@ class PortSession:
         self._current: asyncio.Task[list[str]] | None = None  # the line being carried out
         self._resumed = asyncio.Event()  # cycle start has resumed a paused program
         self.answered = 0
+        self.unanswered_bytes = 0  # of the lines received, ends included, not yet answered
 
     # --- from the sender -------------------------------------------------------------------
 
@@ -102,12 +108,13 @@ class PortSession:
             if isinstance(item, RealTime):
                 self._realtime(item.byte)
             else:
+                self.unanswered_bytes += _wire_bytes(item)
                 self._lines.put_nowait(item)
 
     def _realtime(self, byte: int) -> None:
         if byte == STATUS_QUERY:
             if self.grbl.status_line:
-                self._say(self.grbl.status_line)
+                self._say(_with_rx_free(self.grbl.status_line, self._rx_free()))
         elif byte == FEED_HOLD:
             self._background(self.sender.pause())
         elif byte == CYCLE_START:
@@ -122,7 +129,7 @@ class PortSession:
             # At once, as grbl does: what waits is gone before another byte is read, so
             # lines the sender writes after the reset are kept.
             while not self._lines.empty():
-                self._lines.get_nowait()
+                self.unanswered_bytes -= _wire_bytes(self._lines.get_nowait())
             if self._current is not None:
                 self._current.cancel()  # an M3 waiting for the pierce: the daemon aborts it
             self.receiver.reset()
@@ -140,6 +147,7 @@ class PortSession:
                 current = self._current = asyncio.ensure_future(self._answer(line))
                 await asyncio.wait({current})
                 self._current = None
+                self.unanswered_bytes -= _wire_bytes(line)
                 if current.cancelled():
                     continue  # a reset: grbl forgets the line, so the sender does too
                 for text in current.result():
@@ -197,9 +205,13 @@ class PortSession:
             if state in LIT:
                 return [f"[MSG:jog refused: a cut is lit ({state})]", f"error:{NOT_IDLE}"]
         try:
-            return await self.grbl.relay(text)
+            said = await self.grbl.relay(text)
         except BackendError as exc:
             return [f"[MSG:{_one_line(str(exc))}]", f"error:{_grbl_code(str(exc))}"]
+        return [_with_rx_size(line) for line in said]
+
+    def _rx_free(self) -> int:
+        return max(0, RX_BUFFER_BYTES - self.unanswered_bytes)
 
     async def _resume(self, plan: ProgramPlan) -> None:
         """Cycle start after a pause: re-armed, the cut started again where the torch
@@ -239,6 +251,31 @@ class PortSession:
             await work
         except (BackendError, DaemonError, CommandError) as exc:
             self._say(f"[MSG:{_one_line(str(exc))}]")
+
+
+def _wire_bytes(line: Line) -> int:
+    return len(line.text.encode("ascii", "replace")) + 1  # its end (LF)
+
+
+def _with_rx_size(text: str) -> str:
+    """``[OPT:flags,blocks,rx]`` with the port's receive buffer as rx."""
+    if not (text.startswith("[OPT:") and text.endswith("]")):
+        return text
+    fields = text[5:-1].split(",")
+    if len(fields) >= 3:
+        fields[2] = str(RX_BUFFER_BYTES)
+    return "[OPT:" + ",".join(fields) + "]"
+
+
+def _with_rx_free(report: str, free: int) -> str:
+    """A status report with ``Bf:blocks,rx``'s rx as the port's free bytes."""
+    fields = report.split("|")
+    for i, field in enumerate(fields):
+        if field.startswith("Bf:") and "," in field:
+            blocks, _, rest = field[3:].partition(",")
+            tail = rest[len(rest.rstrip(">")) :]
+            fields[i] = f"Bf:{blocks},{free}{tail}"
+    return "|".join(fields)
 
 
 def _comment_only(text: str) -> bool:

@@ -8,7 +8,7 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
-from dthc_tools.grbl_port.session import BANNER, PortSession
+from dthc_tools.grbl_port.session import BANNER, RX_BUFFER_BYTES, PortSession
 from dthc_tools.sender import Sender
 
 from ..sender.test_sender_lines import FakeBackend, FakeDaemon
@@ -200,3 +200,44 @@ async def test_a_feed_hold_mid_cut_holds_the_next_line_and_cycle_start_pierces_a
     assert port.daemon.lines.count("M3") == 2  # the cut started again where the torch stood
     assert port.grbl.resumed == 1
     assert "rearm" in port.daemon.requests
+
+
+async def test_a_sender_is_told_the_ports_receive_buffer_not_grbls() -> None:
+    """``$I``'s [OPT:] gives the port's 128 bytes (grblHAL would say 1024); a report's Bf:
+    the port's free bytes, less the lines it holds behind an M3."""
+
+    class GrblHal(Grbl):
+        status_line = "<Idle|MPos:0.000,0.000,0.000|Bf:35,1023|FS:0,0>"
+
+        async def relay(self, text: str) -> list[str]:
+            return ["[VER:1.1f.20230101:]", "[OPT:VNMZL,35,1024]", "ok"]
+
+    async def body(port: Port) -> None:
+        port.session.received(b"$I\n")
+        await port.settle()
+        port.session.received(b"?")
+        await port.settle()
+        port.session.received(b"M3\nG1 X50 F2000\n?")  # 3 + 13 bytes wait, ends included
+        await port.settle()
+        port.daemon.xy_may_move.set()
+        await port.settle()
+        port.session.received(b"?")
+        await port.settle()
+
+    port = Port()
+    port.grbl = GrblHal()
+    port.session = PortSession(Sender(port.daemon, port.grbl), port.grbl, port.out.extend)
+    runner = asyncio.ensure_future(port.session.run())
+    try:
+        await body(port)
+    finally:
+        runner.cancel()
+        await asyncio.gather(runner, return_exceptions=True)
+    said = port.said
+    assert said[:3] == ["[VER:1.1f.20230101:]", f"[OPT:VNMZL,35,{RX_BUFFER_BYTES}]", "ok"]
+    reports = [line for line in said if line.startswith("<")]
+    assert reports == [
+        f"<Idle|MPos:0.000,0.000,0.000|Bf:35,{RX_BUFFER_BYTES}|FS:0,0>",
+        f"<Idle|MPos:0.000,0.000,0.000|Bf:35,{RX_BUFFER_BYTES - 16}|FS:0,0>",
+        f"<Idle|MPos:0.000,0.000,0.000|Bf:35,{RX_BUFFER_BYTES}|FS:0,0>",
+    ]
