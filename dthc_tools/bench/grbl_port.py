@@ -11,14 +11,17 @@ same lines go one at a time to each (written, then the answer awaited, as a send
 - ``feed``: a move with a new feed (``G1 X0 F…``): besides, the feed the daemon's
   anti-dive compares the speed with goes to the daemon and is answered over MQTT first.
 
-Not measured here: the age of the anti-dive speed, which the port takes from the reference
-sender's grbl backend unchanged (its status poll, ``--status-hz``).
+And the age of the anti-dive speed: the port polls grbl's status (``--status-hz``, 10 by
+default) and reports the XY speed to the daemon (``request/motion``, QoS 0). From a move's
+``ok`` (grbl has started it) to the first report of a non-zero speed reaching the broker:
+``speed_onset`` (p50/p99), against the poll period it cannot beat.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import os
 import select
 import subprocess
@@ -28,6 +31,8 @@ import time
 import tty
 from collections.abc import Callable
 from pathlib import Path
+
+import aiomqtt
 
 from ..demo import Stack, StackOptions
 from ..grbl_port.process import start_port
@@ -41,6 +46,8 @@ KINDS: dict[str, Callable[[int], str]] = {
     "feed": lambda i: f"G1 X0 F{1000 + 500 * (i % 2)}",
 }
 ADDED_P99_MS = 25.0  # a modal line: the port's own work, well under a sender's patience
+STATUS_HZ = 10.0  # the port's default grbl poll (grbl-port --status-hz)
+ONSETS = 12  # moves started, for the speed's onset
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,6 +76,7 @@ async def _measure(lines: int) -> dict[str, object]:
                     )
                     try:
                         port_us = await asyncio.to_thread(_answer_times, listen, lines)
+                        onsets_ms = await _speed_onsets(listen, stack)
                     finally:
                         port.terminate()
                         await asyncio.to_thread(port.wait, 10)
@@ -88,10 +96,66 @@ async def _measure(lines: int) -> dict[str, object]:
             "added_p50_ms": round((p50 - b50) / 1000.0, 3),
             "added_p99_ms": round(added_p99[kind], 3),
         }  # fmt: skip
+    onset = percentiles([ms * 1000 for ms in onsets_ms])
+    period_ms = 1000.0 / STATUS_HZ
+    out["speed_onset_us"] = onset
+    out["status_poll_ms"] = period_ms
     out["goals"] = goals_block(
-        [Goal("port_added_p99_ms_modal", round(added_p99["modal"], 3), ADDED_P99_MS, True, " ms")]
+        [
+            Goal(
+                "port_added_p99_ms_modal", round(added_p99["modal"], 3), ADDED_P99_MS, True, " ms"
+            ),
+            # A poll period, plus the report's way to the broker and grbl's acceleration.
+            Goal(
+                "speed_onset_p99_ms", round(_us(onset, "p99") / 1000, 1), 2 * period_ms, True, " ms"
+            ),
+        ]
     )
     return out
+
+
+async def _speed_onsets(listen: Path, stack: Stack) -> list[float]:
+    """ms from each move's ``ok`` through the port to the first ``motion`` report of a
+    non-zero XY speed at the broker; each move ends (a report of 0) before the next."""
+    reports: list[tuple[float, float]] = []  # (monotonic s, xy speed)
+    got = asyncio.Event()
+
+    async def listen_reports(client: aiomqtt.Client) -> None:
+        async for message in client.messages:
+            speed = json.loads(bytes(message.payload)).get("xy_speed_mm_s")
+            if isinstance(speed, int | float):
+                reports.append((time.monotonic(), float(speed)))
+                got.set()
+
+    async def first(after: float, moving: bool) -> float:
+        while True:
+            for at, speed in reports:
+                if at >= after and (speed > 0) == moving:
+                    return at
+            got.clear()
+            await asyncio.wait_for(got.wait(), 10)
+
+    link = _Pty(listen)
+    onsets = []
+    try:
+        async with aiomqtt.Client(
+            **stack.broker_settings("dashboard").client_options(), identifier="port-bench"
+        ) as client:
+            await client.subscribe(f"{stack.root}/request/motion", qos=0)
+            reader = asyncio.create_task(listen_reports(client))
+            try:
+                for i in range(ONSETS):
+                    x = 10 if i % 2 == 0 else 0  # short moves: the onset is what counts
+                    await asyncio.to_thread(link.write, f"G1 X{x} F3000\n".encode())
+                    await asyncio.to_thread(link.line_starting, b"ok")
+                    started = time.monotonic()
+                    onsets.append((await first(started, moving=True) - started) * 1000)
+                    await first(time.monotonic(), moving=False)
+            finally:
+                reader.cancel()
+    finally:
+        link.close()
+    return onsets
 
 
 def _us(stats: dict[str, object], key: str) -> float:

@@ -158,7 +158,8 @@ def test_latency_suite_short_run_as_a_module() -> None:
 
 @pytest.mark.slow
 def test_port_suite_times_both_kinds_of_line_through_the_port_and_bare() -> None:
-    """``bench port --lines 20``: a bare grbl and the port in one run, each kind timed."""
+    """``bench port --lines 20``: a bare grbl and the port in one run, each kind timed; the
+    speed's onset at the broker for each of 12 moves."""
     report = run_module(120, "port", "--lines", "20")
     for kind in ("modal", "feed"):
         figures = report[kind]
@@ -166,6 +167,11 @@ def test_port_suite_times_both_kinds_of_line_through_the_port_and_bare() -> None
         assert 0 < figures["bare_us"]["p50"] <= figures["bare_us"]["p99"]
         assert figures["ratio_p50"] > 0
     assert "port_added_p99_ms_modal" in report["goals"]
+    # The anti-dive speed: every move's onset seen, none before its move was accepted.
+    onset = report["speed_onset_us"]
+    assert onset["n"] == 12
+    assert 0 < onset["p50"] <= onset["p99"]
+    assert "speed_onset_p99_ms" in report["goals"]
 
 
 def test_programs_split_into_cuts_with_a_slow_down_at_the_end() -> None:
