@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import select
+import shutil
 import signal
 import subprocess
 import time
@@ -123,10 +124,16 @@ class EmulatedBoard:
     def pid(self) -> int:
         return self._require().pid
 
+    @property
+    def elf(self) -> Path:
+        """The ELF the board runs."""
+        o = self.options
+        return o.elf if o.elf is not None else firmware_elf(checkout_root(), o.mcu, o.arc_input)
+
     def command_line(self) -> list[str]:
         o = self.options
         root = checkout_root()
-        elf = o.elf if o.elf is not None else firmware_elf(root, o.mcu, o.arc_input)
+        elf = self.elf
         argv = [str(host_binary(root)), "--elf", str(elf), "--mcu", o.mcu, "--pty", str(self.pty)]
         argv += ["--seed", str(o.seed), "--arc-input", o.arc_input]
         for key, value in o.vtof.items():
@@ -204,6 +211,22 @@ class EmulatedBoard:
     def set_input(self, name: str, level: bool | None) -> None:
         """Force an input active (True) or inactive (False); None gives it back to the model."""
         self.command(f"set {name} {'auto' if level is None else int(level)}")
+
+    def peek(self, symbol: str) -> int:
+        """A firmware variable's value now (unsigned, little-endian, at most 4 bytes), found
+        by its name in the ELF's symbol table (avr-nm)."""
+        nm = shutil.which("avr-nm")  # binutils-avr, installed with the firmware's build tools
+        if nm is None:
+            raise ControlError("avr-nm is not installed (binutils-avr)")
+        listing = subprocess.run(  # noqa: S603 - binutils' nm on our own ELF
+            [nm, "-S", str(self.elf)], capture_output=True, text=True, check=True
+        ).stdout
+        for line in listing.splitlines():
+            words = line.split()
+            if len(words) == 4 and words[3] == symbol:
+                addr, size = int(words[0], 16) & 0xFFFF, int(words[1], 16)
+                return int(self.command(f"peek {addr} {min(size, 4)}").split()[1])
+        raise ControlError(f"no symbol {symbol!r} with a size in {self.elf}")
 
     def reboot(self) -> None:
         """SIGUSR2: reset the MCU as its reset pin would; physical Z is kept."""
