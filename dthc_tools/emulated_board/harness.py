@@ -29,7 +29,14 @@ from typing import IO, Final
 
 from dthc_tools.procs import die_with_parent
 
-from .build import EmulatedBoardError, checkout_root, ensure_built, firmware_elf, host_binary
+from .build import (
+    EmulatedBoardError,
+    arduino_bootloader,
+    checkout_root,
+    ensure_built,
+    firmware_elf,
+    host_binary,
+)
 
 __all__ = [
     "BoardStatus",
@@ -72,6 +79,12 @@ class HarnessOptions:
     # 10 V), e.g. {"vtof-zero-hz": 100000.0}: vtof-zero-hz, vtof-full-hz, vtof-full-v.
     vtof: Mapping[str, float] = field(default_factory=dict)
     speed: float | None = None  # simulated seconds per wall second (0: flat out)
+    # Arduino's bootloader at the top of flash (BOOTRST): every reset starts there, and the
+    # port's opening resets the MCU (the auto-reset). The application then comes from
+    # ``flash`` (Intel HEX, as avrdude leaves it), or is erased (None: a board as its
+    # bootloader was burned); ``elf`` is not loaded (it still names the symbols for peek).
+    bootloader: bool = False
+    flash: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -133,8 +146,13 @@ class EmulatedBoard:
     def command_line(self) -> list[str]:
         o = self.options
         root = checkout_root()
-        elf = self.elf
-        argv = [str(host_binary(root)), "--elf", str(elf), "--mcu", o.mcu, "--pty", str(self.pty)]
+        argv = [str(host_binary(root)), "--mcu", o.mcu, "--pty", str(self.pty)]
+        if o.bootloader:
+            argv += ["--bootloader", str(arduino_bootloader(o.mcu))]
+            if o.flash is not None:
+                argv += ["--flash", str(o.flash)]
+        else:
+            argv += ["--elf", str(self.elf)]
         argv += ["--seed", str(o.seed), "--arc-input", o.arc_input]
         for key, value in o.vtof.items():
             argv += [f"--{key}", repr(float(value))]
@@ -150,6 +168,8 @@ class EmulatedBoard:
         """Build what is stale (if asked), start the host, wait for its READY line."""
         if self.options.build:
             ensure_built(checkout_root(), firmware=self.options.elf is None)
+        if self.options.flash is not None and not self.options.bootloader:
+            raise EmulatedBoardError("HarnessOptions.flash needs bootloader=True")
         if self.options.stderr is not None:
             self._stderr = self.options.stderr.open("wb")
         self.proc = subprocess.Popen(  # noqa: S603 - our own host program, built here
