@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools firmware board-lib cc-tools codegen cncjs clean
+.PHONY: test demo lint typecheck unit bench broker browser systemd-tools avr-tools flash-tools firmware board-lib cc-tools codegen cncjs clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -68,6 +68,17 @@ avr-tools:
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq $(AVR_PACKAGES) >/dev/null; }
 
+# Flashing as a table owner does: Debian's avrdude through Arduino's own bootloaders
+# (arduino-core-avr ships them as HEX, loaded by the emulated board from /usr/share).
+FLASH_PACKAGES := avrdude arduino-core-avr
+flash-tools:
+	@{ command -v avrdude >/dev/null 2>&1 && \
+	  test -f /usr/share/arduino/hardware/arduino/avr/bootloaders/stk500v2/stk500boot_v2_mega2560.hex && \
+	  test -f /usr/share/arduino/hardware/arduino/avr/bootloaders/atmega/ATmegaBOOT_168_atmega328.hex; } || { \
+	  echo "installing avrdude and Arduino's bootloaders (apt-get)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $(FLASH_PACKAGES) >/dev/null; }
+
 # The mock device runs the firmware's board logic (firmware/board/) as a shared library
 # (firmware/build/host/libdthc_board.so, STYLE 23): it needs a C compiler and make; install
 # Debian's where they are missing.
@@ -82,7 +93,7 @@ board-lib: cc-tools
 
 # The HEX and ELF a table owner flashes (Mega 2560 and Nano), their flash and RAM use, and
 # the emulated-board harness that runs them.
-firmware: avr-tools
+firmware: avr-tools flash-tools
 	$(MAKE) --no-print-directory -C firmware
 	$(MAKE) --no-print-directory -C firmware/emulator
 

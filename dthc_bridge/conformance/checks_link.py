@@ -24,10 +24,12 @@ from ..transport import TransportError
 from .context import SuiteContext, mm
 from .errors import describe_reply
 from .options import (
+    BOOT_WINDOW_S,
     HANDSHAKE_ATTEMPTS,
     HANDSHAKE_TIMEOUT_S,
     LISTEN_BEFORE_HELLO_S,
     REPLY_SETTLE_S,
+    RESET_SETTLE_S,
     RESET_WAIT_S,
     SINGLE_ATTEMPT_TIMEOUT_S,
     SUITE_LEASE_MS,
@@ -92,8 +94,11 @@ async def check_handshake(ctx: SuiteContext) -> list[CheckResult]:
     loop = asyncio.get_running_loop()
     t0 = loop.time()
     mark = link.mark()
+    # Not a byte before the board speaks: it may be in its bootloader (BOOT_WINDOW_S).
+    await link.wait_for(lambda _msg: True, BOOT_WINDOW_S, since=mark)
     await asyncio.sleep(LISTEN_BEFORE_HELLO_S)
     batches_before = len(link.messages(fp.Samples, since=mark))
+    link.write(b"\x00")  # ends any partial frame the board holds
     try:
         reply = await link.request(
             _hello(link.next_seq()),
@@ -476,15 +481,24 @@ def _reset_reason(code: int) -> str:
 
 async def _wait_new_boot(ctx: SuiteContext, old: int, wait_s: float) -> fp.HelloInfo | None:
     """Poll QUERY(HELLO_INFO) (allowed without a session) until the boot id changes;
-    reopen the link if the reset took the port away (USB re-enumeration)."""
+    reopen the link if the reset took the port away (USB re-enumeration). Each query waits
+    for a frame from the board since the last one: a board in its bootloader is silent, and
+    a byte sent to it then keeps it there (BOOT_WINDOW_S)."""
     link = ctx.link
     loop = asyncio.get_running_loop()
     deadline = loop.time() + wait_s
+    await asyncio.sleep(RESET_SETTLE_S)
+    mark = link.mark()
     while loop.time() < deadline:
         try:
             if link.lost_reason is not None:
                 await link.close()
                 await link.open()
+                mark = link.mark()
+            heard = await link.wait_for(lambda _msg: True, deadline - loop.time(), since=mark)
+            if heard is None:
+                break
+            mark = link.mark()
             reply = await link.request(fp.Query(0, fp.QueryWhat.HELLO_INFO), attempts=1)
             if isinstance(reply, fp.HelloInfo) and reply.boot_id != old:
                 return reply

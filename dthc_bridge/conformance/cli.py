@@ -15,7 +15,7 @@ from typing import TextIO
 
 from .options import ConformanceOptions
 from .report import CheckResult, SuiteReport
-from .suite import run_suite
+from .suite import CHECK_NAMES, run_suite
 
 __all__ = ["EXIT_FAILED", "EXIT_PASSED", "EXIT_USAGE", "add_arguments", "run_from_args"]
 
@@ -81,6 +81,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--ack-timeout-ms", type=float, default=d.ack_timeout_ms, help="wait per attempt"
     )
     t.add_argument("--baudrate", type=int, default=d.baudrate, help="serial ports only")
+    parser.add_argument(
+        "--only",
+        metavar="CHECK[,CHECK]",
+        default="",
+        help="run only these checks (with the handshake and set-up; the checks measured "
+        "together with them run too), e.g. --only telemetry_gaps",
+    )
 
 
 def options_from_args(args: argparse.Namespace) -> ConformanceOptions:
@@ -102,7 +109,18 @@ def options_from_args(args: argparse.Namespace) -> ConformanceOptions:
         ack_timeout_ms=args.ack_timeout_ms,
         input_timeout_s=args.input_timeout_s,
         baudrate=args.baudrate,
+        only=_only(args.only),
     )
+
+
+def _only(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in CHECK_NAMES]
+    if unknown:
+        raise ValueError(
+            f"--only: no check named {', '.join(unknown)} (checks: {', '.join(CHECK_NAMES)})"
+        )
+    return names
 
 
 class ConsoleOperator:

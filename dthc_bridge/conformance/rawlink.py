@@ -103,7 +103,8 @@ class RawBoardLink:
                 self.url, on_bytes, on_lost, baudrate=self._baudrate
             )
         self._lost = None
-        self.write(b"\x00")  # ends any partial frame the board holds
+        # No byte yet: a board whose port just opened may be in its bootloader (the
+        # handshake sends the 0x00 that ends a partial frame when the board has spoken).
 
     async def close(self) -> None:
         await self.stop_keepalive()

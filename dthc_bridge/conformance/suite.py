@@ -155,6 +155,10 @@ async def run_suite(
             skip_rest("the board could not be prepared", hint=setup_error)
             return report
         for step in _STEPS:
+            if options.only and not set(step.names) & set(options.only):
+                for name in step.names:
+                    record(skipped(name, "not selected (--only)"))
+                continue
             for result in await _run_step(ctx, step):
                 record(result)
             if link.lost_reason is not None:

@@ -107,6 +107,7 @@ class BoardSession:
         self._clock_known = False  # the handshake's CLOCK reply anchors the 32-bit stamps
         self._last_event_counter: int | None = None
         self.lost: asyncio.Future[LinkError] = self._loop.create_future()
+        self._heard = asyncio.Event()  # a valid frame arrived from the board
         self._trace = new_frame_trace()  # None unless the trace switch is on
         self._hooks = trace  # a measuring tool's (SessionTrace); None in the daemon
 
@@ -114,7 +115,7 @@ class BoardSession:
 
     async def open(self, opener: TransportOpener) -> None:
         self._transport = await opener(self._on_bytes, self._on_lost)
-        self._write(b"\x00")  # ends any partial frame the board holds
+        # Not a byte yet: the board may be in its bootloader (handshake, boot_window_s).
 
     @property
     def is_up(self) -> bool:
@@ -242,7 +243,26 @@ class BoardSession:
 
     # --- handshake, lease, clock -----------------------------------------------------------
 
+    async def wait_for_board(self) -> bool:
+        """Wait until the board has sent a valid frame (True), or ``boot_window_s`` passed
+        without one (False): an Arduino opened through its USB-serial chip resets and runs
+        its bootloader first, and a host that talks into that window keeps it there."""
+        if self._heard.is_set():
+            return True
+        started_s = self._loop.time()
+        try:
+            await asyncio.wait_for(self._heard.wait(), self.timing.boot_window_s)
+        except TimeoutError:
+            log.debug("board_silent", url=self.url, waited_s=self.timing.boot_window_s)
+            return False
+        log.debug(
+            "board_heard", url=self.url, after_ms=round((self._loop.time() - started_s) * 1e3)
+        )
+        return True
+
     async def handshake(self) -> fp.HelloInfo:
+        await self.wait_for_board()
+        self._write(b"\x00")  # ends any partial frame the board holds
         hello = fp.Hello(0, fp.PROTOCOL_MAJOR, fp.PROTOCOL_MINOR, random.getrandbits(32))
         info = await self.request(hello, self.timing.handshake_timeout_s)
         assert isinstance(info, fp.HelloInfo)
@@ -310,6 +330,7 @@ class BoardSession:
         if self._trace is not None:
             self._trace.record_in(data)  # before decoding: a bad frame is in its own dump
         for msg in self.decoder.feed(data):
+            self._heard.set()
             cls = type(msg)
             if cls is fp.Samples:
                 self._on_samples(msg)  # type: ignore[arg-type]

@@ -20,6 +20,12 @@ class LinkTiming:
     window: int = fp.HOST_WINDOW  # sequenced commands in flight
     lease_ms: int = fp.DEFAULT_LEASE_MS
     handshake_timeout_s: float = 0.5
+    # An Arduino resets when its port opens (DTR) and sits in its bootloader first (0.84 s
+    # on a Mega 2560, 1.34 s on an old-bootloader Nano, measured on the emulated boards); a
+    # byte sent then reaches the bootloader (the Mega's then waits 5 s more). The handshake
+    # starts at the board's first frame (it streams SAMPLES from power-on), or after this
+    # long without one.
+    boot_window_s: float = 1.5
     max_consecutive_timeouts: int = 3  # then the link is declared down
     backoff_initial_s: float = 0.2
     backoff_max_s: float = 5.0

@@ -16,9 +16,11 @@ __all__ = [
     "BuildError",
     "EmulatedBoardError",
     "ToolsMissing",
+    "arduino_bootloader",
     "checkout_root",
     "ensure_built",
     "firmware_elf",
+    "firmware_hex",
     "host_binary",
     "missing_tools",
     "selftest_elf",
@@ -83,6 +85,42 @@ def firmware_elf(root: Path, mcu: str, arc_input: str = "adc") -> Path:
             "the Mega 2560's is T5 (D47)"
         )
     return root / "firmware" / "build" / f"{mcu}-{arc_input}" / "dthc-firmware.elf"
+
+
+def firmware_hex(root: Path, mcu: str, arc_input: str = "adc") -> Path:
+    """The HEX beside the ELF: what a table owner flashes with avrdude."""
+    return firmware_elf(root, mcu, arc_input).with_suffix(".hex")
+
+
+# Arduino's own bootloaders as Debian's arduino-core-avr ships them (loaded from there at
+# run time, never copied): the Mega 2560's stk500v2 (avrdude -c wiring, 115200 baud) and
+# the old-bootloader Nano's ATmegaBOOT (avrdude -c arduino, 57600 baud). Not the Uno/new
+# Nano's optiboot: Debian's build of optiboot_atmega328.hex (arduino-core-avr
+# 1.8.7+dfsg-1~deb12u1) is 532 bytes, 20 past the 512-byte boot section it must fit: code
+# at 0x8000-0x8013, beyond the 328P's flash, and the version word at 0x7FFE written over
+# an instruction.
+ARDUINO_BOOTLOADERS: Final = Path("/usr/share/arduino/hardware/arduino/avr/bootloaders")
+BOOTLOADER_HEX: Final = {
+    "atmega2560": ARDUINO_BOOTLOADERS / "stk500v2" / "stk500boot_v2_mega2560.hex",
+    "atmega328p": ARDUINO_BOOTLOADERS / "atmega" / "ATmegaBOOT_168_atmega328.hex",
+}
+# avrdude's programmer and baud rate for each: as firmware/README.md tells owners.
+BOOTLOADER_AVRDUDE: Final = {
+    "atmega2560": ("wiring", 115_200),
+    "atmega328p": ("arduino", 57_600),
+}
+BOOTLOADER_INSTALL_HINT: Final = "sudo apt-get install arduino-core-avr avrdude"
+
+
+def arduino_bootloader(mcu: str) -> Path:
+    """Arduino's bootloader HEX for ``mcu`` from Debian's arduino-core-avr (EmulatedBoardError
+    naming the package when it is not installed)."""
+    path = BOOTLOADER_HEX.get(mcu)
+    if path is None:
+        raise EmulatedBoardError(f"no Arduino bootloader known for {mcu}")
+    if not path.is_file():
+        raise EmulatedBoardError(f"{path} is missing: {BOOTLOADER_INSTALL_HINT}")
+    return path
 
 
 def selftest_elf(root: Path, mcu: str) -> Path:

@@ -23,6 +23,7 @@ from .build import (
     MCUS,
     EmulatedBoardError,
     ToolsMissing,
+    arduino_bootloader,
     checkout_root,
     ensure_built,
     firmware_elf,
@@ -70,6 +71,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--selftest", action="store_true", help="run the harness's own test program instead"
     )
+    p.add_argument(
+        "--bootloader",
+        action="store_true",
+        help="Arduino's own bootloader at the top of flash (Debian's arduino-core-avr), as a "
+        "board off the shelf: every reset starts it, opening the port resets the MCU; the "
+        "application from --flash, or erased (flash it with avrdude through the pty)",
+    )
+    p.add_argument(
+        "--flash", type=Path, metavar="HEX", help="with --bootloader: the application's HEX"
+    )
     p.add_argument("--record", type=Path, help="write the event record here")
     p.add_argument("--seed", type=int, default=1, help="noise seed")
     p.add_argument("--no-build", action="store_true", help="do not run make first")
@@ -89,7 +100,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.flash is not None and not args.bootloader:
+        parser.error("--flash needs --bootloader")
+    if args.bootloader and (args.elf is not None or args.selftest):
+        parser.error("--bootloader runs what is flashed (--flash HEX, or nothing): not --elf")
     try:
         root = checkout_root()
         if args.selftest:
@@ -100,6 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             elf = firmware_elf(root, args.mcu, args.arc_input)
         if not args.no_build:
             ensure_built(root, firmware=args.elf is None and not args.selftest)
+        bootloader = arduino_bootloader(args.mcu) if args.bootloader else None
     except ToolsMissing as exc:
         print(
             f"dthc-emulated-board: build tools missing: {', '.join(exc.missing)}\n"
@@ -111,7 +128,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dthc-emulated-board: {exc}", file=sys.stderr)
         return EXIT_SETUP
     host = host_binary(root)
-    command = [str(host), "--elf", str(elf), "--mcu", args.mcu, "--pty", str(args.pty)]
+    command = [str(host), "--mcu", args.mcu, "--pty", str(args.pty)]
+    if bootloader is not None:
+        command += ["--bootloader", str(bootloader)]
+        if args.flash is not None:
+            command += ["--flash", str(args.flash)]
+    else:
+        command += ["--elf", str(elf)]
     command += ["--seed", str(args.seed), "--arc-input", args.arc_input]
     if args.record is not None:
         command += ["--record", str(args.record)]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import select
+import shutil
 import signal
 import subprocess
 import time
@@ -28,7 +29,14 @@ from typing import IO, Final
 
 from dthc_tools.procs import die_with_parent
 
-from .build import EmulatedBoardError, checkout_root, ensure_built, firmware_elf, host_binary
+from .build import (
+    EmulatedBoardError,
+    arduino_bootloader,
+    checkout_root,
+    ensure_built,
+    firmware_elf,
+    host_binary,
+)
 
 __all__ = [
     "BoardStatus",
@@ -71,6 +79,12 @@ class HarnessOptions:
     # 10 V), e.g. {"vtof-zero-hz": 100000.0}: vtof-zero-hz, vtof-full-hz, vtof-full-v.
     vtof: Mapping[str, float] = field(default_factory=dict)
     speed: float | None = None  # simulated seconds per wall second (0: flat out)
+    # Arduino's bootloader at the top of flash (BOOTRST): every reset starts there, and the
+    # port's opening resets the MCU (the auto-reset). The application then comes from
+    # ``flash`` (Intel HEX, as avrdude leaves it), or is erased (None: a board as its
+    # bootloader was burned); ``elf`` is not loaded (it still names the symbols for peek).
+    bootloader: bool = False
+    flash: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -123,11 +137,22 @@ class EmulatedBoard:
     def pid(self) -> int:
         return self._require().pid
 
+    @property
+    def elf(self) -> Path:
+        """The ELF the board runs."""
+        o = self.options
+        return o.elf if o.elf is not None else firmware_elf(checkout_root(), o.mcu, o.arc_input)
+
     def command_line(self) -> list[str]:
         o = self.options
         root = checkout_root()
-        elf = o.elf if o.elf is not None else firmware_elf(root, o.mcu, o.arc_input)
-        argv = [str(host_binary(root)), "--elf", str(elf), "--mcu", o.mcu, "--pty", str(self.pty)]
+        argv = [str(host_binary(root)), "--mcu", o.mcu, "--pty", str(self.pty)]
+        if o.bootloader:
+            argv += ["--bootloader", str(arduino_bootloader(o.mcu))]
+            if o.flash is not None:
+                argv += ["--flash", str(o.flash)]
+        else:
+            argv += ["--elf", str(self.elf)]
         argv += ["--seed", str(o.seed), "--arc-input", o.arc_input]
         for key, value in o.vtof.items():
             argv += [f"--{key}", repr(float(value))]
@@ -143,6 +168,8 @@ class EmulatedBoard:
         """Build what is stale (if asked), start the host, wait for its READY line."""
         if self.options.build:
             ensure_built(checkout_root(), firmware=self.options.elf is None)
+        if self.options.flash is not None and not self.options.bootloader:
+            raise EmulatedBoardError("HarnessOptions.flash needs bootloader=True")
         if self.options.stderr is not None:
             self._stderr = self.options.stderr.open("wb")
         self.proc = subprocess.Popen(  # noqa: S603 - our own host program, built here
@@ -204,6 +231,22 @@ class EmulatedBoard:
     def set_input(self, name: str, level: bool | None) -> None:
         """Force an input active (True) or inactive (False); None gives it back to the model."""
         self.command(f"set {name} {'auto' if level is None else int(level)}")
+
+    def peek(self, symbol: str) -> int:
+        """A firmware variable's value now (unsigned, little-endian, at most 4 bytes), found
+        by its name in the ELF's symbol table (avr-nm)."""
+        nm = shutil.which("avr-nm")  # binutils-avr, installed with the firmware's build tools
+        if nm is None:
+            raise ControlError("avr-nm is not installed (binutils-avr)")
+        listing = subprocess.run(  # noqa: S603 - binutils' nm on our own ELF
+            [nm, "-S", str(self.elf)], capture_output=True, text=True, check=True
+        ).stdout
+        for line in listing.splitlines():
+            words = line.split()
+            if len(words) == 4 and words[3] == symbol:
+                addr, size = int(words[0], 16) & 0xFFFF, int(words[1], 16)
+                return int(self.command(f"peek {addr} {min(size, 4)}").split()[1])
+        raise ControlError(f"no symbol {symbol!r} with a size in {self.elf}")
 
     def reboot(self) -> None:
         """SIGUSR2: reset the MCU as its reset pin would; physical Z is kept."""

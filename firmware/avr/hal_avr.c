@@ -63,7 +63,6 @@ static uint16_t rx_tail;          /* written by the main loop */
 static uint8_t tx_ring[HAL_TX_RING];
 static volatile uint8_t tx_head; /* written by the producers (tick, locked main loop) */
 static volatile uint8_t tx_tail; /* written by the UDRE interrupt */
-volatile uint16_t hal_rx_overruns;
 
 /* Arrival times of the delimiters in the receive ring, in order (the lease runs from a
  * frame's arrival), as the low 16 bits of the µs clock: the main loop takes a frame's age
@@ -82,20 +81,75 @@ static volatile uint8_t delim_in; /* written by the RX interrupt */
 static uint8_t delim_out;         /* written by the main loop */
 static uint32_t last_delim_us;
 
+/* The receive interrupt keeps up with the line (a byte every 10 us at 1 Mbaud) while the
+ * main loop decodes at about 35 us a byte: bytes no frame can use are discarded here, at
+ * once, and every frame that loses a byte is still counted once (a garbage storm drops
+ * nothing unseen):
+ * - past the longest legal frame (DTHC_MAX_ENCODED_FRAME + 1 bytes: enough for the codec
+ *   to count it TOO_LONG) the rest of the run up to its delimiter is discarded;
+ * - a frame that meets a full ring loses the rest of its bytes; its start and its
+ *   delimiter reach the codec, which counts the truncated frame (a CRC or framing error):
+ *   data bytes take a slot only while two are free, so the delimiter of a frame begun in
+ *   the ring always finds one;
+ * - a frame of which no byte found room never reaches the codec: counted here
+ *   (hal_uart_rx_frames_lost, added to the framing errors the board reports).
+ * hal_rx_discarded counts the bytes discarded here. */
+volatile uint16_t hal_rx_discarded;
+static volatile uint16_t rx_frames_lost;
+/* The run since the last delimiter, in one word (RAM is short on the Nano): its length in
+ * non-delimiter bytes (saturating at RX_RUN_MAX) and two flags. */
+static uint16_t rx_run;
+#define RX_RUN_KEPT 0x8000u /* a byte of this run is in the ring */
+#define RX_RUN_CUT 0x4000u  /* this run lost a byte for want of room */
+#define RX_RUN_LEN 0x3FFFu
+#define RX_RUN_USEFUL (DTHC_MAX_ENCODED_FRAME + 1u)
+#define RX_RUN_MAX (RX_RUN_USEFUL + 1u)
+
 ISR(UART_RX_vect)
 {
     uint8_t b = UDR0;
-    uint16_t next = (uint16_t)((rx_head + 1u) & (HAL_RX_RING - 1u));
-    if (next == rx_tail) {
-        hal_rx_overruns++; /* the codec counts the damaged frame */
-        return;
+    uint16_t head = rx_head;
+    uint16_t used = (uint16_t)((head - rx_tail) & (HAL_RX_RING - 1u));
+    uint16_t free_slots = (uint16_t)(HAL_RX_RING - 1u - used);
+    uint16_t run = rx_run;
+    if (b != 0) {
+        if ((run & RX_RUN_LEN) < RX_RUN_MAX) {
+            run++;
+        }
+        if ((run & RX_RUN_CUT) || (run & RX_RUN_LEN) > RX_RUN_USEFUL) {
+            rx_run = run;
+            hal_rx_discarded++;
+            return;
+        }
+        if (free_slots < 2u) {
+            rx_run = run | RX_RUN_CUT;
+            hal_rx_discarded++;
+            return;
+        }
+        rx_run = run | RX_RUN_KEPT;
+    } else {
+        rx_run = 0;
+        if (!(run & RX_RUN_KEPT)) {
+            if (run) {
+                rx_frames_lost++; /* none of it reached the codec */
+            }
+            return; /* nothing to end: an idle delimiter the codec would ignore */
+        }
+        /* a run begun in the ring: its delimiter has the slot its last byte left */
     }
-    rx_ring[rx_head] = b;
-    rx_head = next;
+    rx_ring[head] = b;
+    rx_head = (uint16_t)((head + 1u) & (HAL_RX_RING - 1u));
     if (b == 0) {
         delim_us16[delim_in & (HAL_DELIM_TIMES - 1u)] = (uint16_t)hal_time_us();
         delim_in++;
     }
+}
+
+uint16_t hal_uart_rx_frames_lost(void)
+{
+    uint16_t n;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { n = rx_frames_lost; }
+    return n;
 }
 
 ISR(UART_UDRE_vect)
@@ -195,8 +249,7 @@ static void uart_init(void)
 
 static volatile uint32_t t1_overflows;
 static uint32_t tick_t_us;
-static uint16_t tick_period_us = 1000;
-static uint16_t tick_period_counts = 2000;
+static uint16_t tick_period_us = 1000; /* Timer1 counts twice per us */
 
 ISR(TIMER1_OVF_vect)
 {
@@ -239,7 +292,6 @@ uint64_t hal_time_us64(void)
 void hal_tick_set_period_us(uint16_t period_us)
 {
     tick_period_us = period_us;
-    tick_period_counts = (uint16_t)(period_us * 2u);
 #if DTHC_ARC_VTOF
     arc_vtof_set_period_us(period_us);
 #endif
@@ -255,15 +307,13 @@ void hal_tick_unlock(void)
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { TIMSK1 |= _BV(OCIE1A); }
 }
 
-volatile uint16_t hal_late_ticks;
-
 ISR(TIMER1_COMPA_vect)
 {
     TIMSK1 &= (uint8_t)~_BV(OCIE1A); /* never re-entered */
     for (;;) {
         uint32_t t = tick_t_us;
         tick_t_us += tick_period_us;
-        OCR1A += tick_period_counts;
+        OCR1A += (uint16_t)(tick_period_us << 1);
         sei();
         board_tick(t);
         cli();
@@ -271,7 +321,7 @@ ISR(TIMER1_COMPA_vect)
         if ((int16_t)(TCNT1 - OCR1A) < 0) {
             break; /* the next tick is still ahead: its match will fire */
         }
-        hal_late_ticks++; /* behind by a period: run it now, with its scheduled time */
+        /* behind by a period: run it now, with its scheduled time */
     }
     TIMSK1 |= _BV(OCIE1A);
 }
@@ -282,7 +332,7 @@ static void timer1_init(void)
     TCCR1B = _BV(CS11); /* normal mode, clk/8 */
     TCNT1 = 0;
     tick_t_us = (uint32_t)tick_period_us;
-    OCR1A = tick_period_counts;
+    OCR1A = (uint16_t)(tick_period_us << 1);
     TIFR1 = _BV(OCF1A) | _BV(TOV1);
     TIMSK1 = _BV(TOIE1) | _BV(OCIE1A);
 }

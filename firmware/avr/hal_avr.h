@@ -8,7 +8,6 @@
 void hal_init(void);  /* pins (outputs off), UART, ADC, step timer; interrupts still off */
 void hal_start(void); /* the clock and the sample tick, continuous ADC */
 bool hal_uart_rx_pending(void);
-extern volatile uint16_t hal_rx_overruns;
-extern volatile uint16_t hal_late_ticks;
+extern volatile uint16_t hal_rx_discarded; /* bytes the receive interrupt discarded */
 
 #endif /* DTHC_HAL_AVR_H */

@@ -11,7 +11,7 @@
 board_t B;
 uint8_t board_small_tx[BOARD_SMALL_TX];
 /* Two SAMPLES buffers: the tick fills one while the main loop encodes and queues the
- * other (board_send_frame: kept out of the tick). */
+ * other (board_flush_samples: kept out of the tick). */
 static uint8_t samples_tx[2][BOARD_SAMPLES_TX];
 static uint8_t samples_fill;                /* the buffer the tick fills */
 static volatile uint8_t samples_ready_len;  /* payload bytes waiting in the other; 0: free */
@@ -30,27 +30,15 @@ void board_send_small(uint8_t type, uint8_t seq, uint8_t len)
 
 /* --- sending from the main loop (tick unlocked) ---------------------------------------- */
 
-/* Queue n encoded bytes whole, with the tick locked. Waits a while for room (the transmit
- * interrupt drains the ring, the tick keeps running); false when there is none (nothing
- * queued). */
+/* Queue n encoded bytes whole, with the tick locked; false when the ring has no room for
+ * them now (nothing queued: the caller tries again at a later poll, nothing waits). */
 bool board_queue(const uint8_t *wire, size_t n)
 {
-    uint16_t spins = 0;
     bool ok;
-    while (hal_uart_tx_free() < n && ++spins) {
-    }
     hal_tick_lock();
     ok = hal_uart_write(wire, (uint16_t)n);
     hal_tick_unlock();
     return ok;
-}
-
-/* A frame whose payload is at buf + DTHC_TX_PAYLOAD_OFFSET: encoded in place (a CRC pass,
- * COBS on the way by rewriting the zeros: about 75 us for a STATUS at 16 MHz), then
- * queued. */
-bool board_send_frame(uint8_t type, uint8_t seq, uint8_t *buf, uint8_t len)
-{
-    return board_queue(buf, dthc_encode_in_place(type, seq, buf, len));
 }
 
 /* --- outputs ---------------------------------------------------------------------------- */

@@ -143,7 +143,9 @@ static uint8_t status(void)
     dthc_status_put_current_da(p, 0); /* no CURRENT_OUT */
 #endif
     dthc_status_put_rx_crc_errors(p, sat16(board_rx.crc_errors));
-    dthc_status_put_rx_framing_errors(p, sat16(board_rx.framing_errors));
+    /* with the frames the receiver lost whole (a full receive buffer): each counted once */
+    dthc_status_put_rx_framing_errors(
+        p, sat16(board_rx.framing_errors + (uint32_t)hal_uart_rx_frames_lost()));
     dthc_status_put_rx_duplicates(p, B.rx_duplicates);
 #ifdef BOARD_TIMING
     dthc_status_put_current_da(p, board_tick_max_us);
@@ -154,13 +156,34 @@ static uint8_t status(void)
     return DTHC_STATUS_SIZE;
 }
 
-/* Encode and queue a query reply (snapshotted under the lock) with the tick running
- * (dropped if the ring stays full: the host asks again). */
+/* A query reply that found no room in the transmit ring: its encoded bytes wait in query_tx
+ * and go at the next poll that finds room; no frame is read meanwhile (its bytes wait in
+ * the receive ring). Nothing waits for room: neither the main loop nor the tick. */
+static uint8_t reply_waiting_len;
+
+static bool queue_waiting_reply(void)
+{
+    bool ok;
+    hal_tick_lock();
+    ok = hal_uart_write(query_tx, reply_waiting_len);
+    hal_tick_unlock();
+    if (ok) {
+        reply_waiting_len = 0;
+    }
+    return ok;
+}
+
+/* Encode a query reply (snapshotted under the lock) with the tick running, and queue it,
+ * or leave it waiting for room (queue_waiting_reply). */
 static void send_query_reply(uint8_t type, uint8_t seq, uint8_t len)
 {
+    uint8_t n;
     hal_tick_unlock();
-    (void)board_send_frame(type, seq, query_tx, len);
+    n = (uint8_t)dthc_encode_in_place(type, seq, query_tx, len);
     hal_tick_lock();
+    if (!hal_uart_write(query_tx, n)) {
+        reply_waiting_len = n;
+    }
 #ifdef BOARD_TIMING
     if (type == DTHC_MSG_STATUS) {
         status_encode_us = (uint16_t)(hal_time_us() - frame_done_us);
@@ -420,6 +443,9 @@ bool board_poll(void)
 {
     uint8_t budget = POLL_BYTES_MAX;
     bool did = false;
+    if (reply_waiting_len && !queue_waiting_reply()) {
+        return board_flush_samples(); /* replies keep their order: no frame read yet */
+    }
     while (budget--) {
         dthc_frame_t f;
         int rc;
@@ -463,6 +489,9 @@ bool board_poll(void)
                 stack_unused = hal_stack_unused();
             }
 #endif
+            if (reply_waiting_len) {
+                break; /* its room first */
+            }
             if (board_samples_waiting()) {
                 break; /* a burst of queries: the batch goes between two replies, not
                           after all of them (the next would complete meanwhile) */

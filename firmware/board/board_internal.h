@@ -156,7 +156,6 @@ bool board_flush_samples(void);
 bool board_samples_waiting(void);
 uint16_t board_tx_reserve(void);
 bool board_queue(const uint8_t *wire, size_t n);
-bool board_send_frame(uint8_t type, uint8_t seq, uint8_t *buf, uint8_t len);
 extern uint8_t board_small_tx[BOARD_SMALL_TX];
 #define BOARD_SMALL_PAYLOAD_AT (board_small_tx + DTHC_TX_PAYLOAD_OFFSET)
 

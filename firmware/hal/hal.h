@@ -44,6 +44,10 @@ int16_t hal_uart_getc(void);
  * A frame is valid from its delimiter's arrival, so the host lease runs from there, not
  * from when the main loop got round to decoding it (up to a millisecond later). */
 uint32_t hal_uart_delimiter_us(void);
+/* Frames the receiver lost whole before the board saw a byte of them (a full receive
+ * buffer), so that the board can count them with its framing errors: every bad frame is
+ * counted once. 0 for a port that never loses one. */
+uint16_t hal_uart_rx_frames_lost(void);
 /* Free bytes in the transmit ring. */
 uint16_t hal_uart_tx_free(void);
 /* Queue n bytes for transmission, all or nothing; false (nothing queued) when they do not

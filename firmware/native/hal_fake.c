@@ -101,6 +101,11 @@ uint32_t hal_uart_delimiter_us(void)
     return F.delimiter_us;
 }
 
+uint16_t hal_uart_rx_frames_lost(void)
+{
+    return F.rx_frames_lost;
+}
+
 uint16_t hal_uart_tx_free(void)
 {
     unsigned free_bytes = F.tx_cap > F.tx_len ? F.tx_cap - F.tx_len : 0;

@@ -25,6 +25,7 @@ typedef struct {
     uint32_t rx_at_us[4096]; /* when each queued byte arrived */
     unsigned rx_len, rx_pos;
     uint32_t delimiter_us;   /* arrival of the last 0x00 hal_uart_getc returned */
+    uint16_t rx_frames_lost; /* what hal_uart_rx_frames_lost returns */
     uint8_t tx[65536];
     unsigned tx_len;
     unsigned tx_cap;        /* ring space the fake pretends to have */

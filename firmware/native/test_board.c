@@ -1337,6 +1337,56 @@ static int test_limit_switch_stops_and_latches(void)
     return 0;
 }
 
+/* Frames the receiver lost whole (a full receive buffer: hal_uart_rx_frames_lost) are
+ * framing errors in STATUS, beside the codec's own: every bad frame counted once. */
+static int test_frames_lost_in_the_receiver_count_as_framing_errors(void)
+{
+    static const uint8_t bad[] = {0x06, 0x11, 0x22, 0x33, 0x44, 0x55, 0x00}; /* CRC wrong */
+    fake_rx(bad, sizeof bad);
+    while (board_poll()) {
+    }
+    F.rx_frames_lost = 3;
+    CHECK(dthc_status_get_rx_crc_errors(status()->p) == 1, "the bad CRC not counted");
+    CHECK(dthc_status_get_rx_framing_errors(status()->p) == 3,
+          "framing errors %u, expected the 3 frames lost in the receiver",
+          (unsigned)dthc_status_get_rx_framing_errors(status()->p));
+    return 0;
+}
+
+/* A STATUS query whose reply meets a full transmit ring (the ring filled while the query
+ * arrived): the main loop neither waits for room nor drops the reply; the reply goes out at
+ * the first poll with room, before the next frame is read. */
+static int test_a_reply_waits_for_room_without_waiting_in_the_loop(void)
+{
+    uint8_t wire[16], what = DTHC_QUERY_STATUS;
+    size_t len;
+    unsigned mark;
+    hello();
+    run_ms(10);
+    mark = n_out;
+    len = dthc_encode_frame(DTHC_MSG_QUERY, 77, &what, 1, wire, sizeof wire);
+    fake_rx(wire, 3); /* its first bytes, read while there is room */
+    while (board_poll()) {
+    }
+    F.tx_cap = F.tx_len; /* then the ring is full */
+    fake_rx(wire + 3, (unsigned)len - 3u);
+    len = dthc_encode_frame(DTHC_MSG_QUERY, 78, &what, 1, wire, sizeof wire);
+    fake_rx(wire, (unsigned)len);
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(!last(DTHC_MSG_STATUS, 77, mark), "answered without room");
+    CHECK(F.rx_pos < F.rx_len, "the next query read while the first reply waits");
+    F.tx_cap = sizeof F.tx;
+    while (board_poll()) {
+    }
+    parse();
+    CHECK(last(DTHC_MSG_STATUS, 77, mark) && last(DTHC_MSG_STATUS, 78, mark),
+          "a reply lost: 77 %d, 78 %d", last(DTHC_MSG_STATUS, 77, mark) != NULL,
+          last(DTHC_MSG_STATUS, 78, mark) != NULL);
+    return 0;
+}
+
 typedef int (*test_fn)(void);
 static const struct {
     const char *name;
@@ -1377,6 +1427,8 @@ static const struct {
     T(arc_lost),
     T(xy_speed_and_current_out),
     T(limit_switch_stops_and_latches),
+    T(frames_lost_in_the_receiver_count_as_framing_errors),
+    T(a_reply_waits_for_room_without_waiting_in_the_loop),
 #undef T
 };
 #define N_TESTS (sizeof TESTS / sizeof TESTS[0])

@@ -8,12 +8,15 @@ the lease is checked at rest only), a link that cannot be opened, and the pure p
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 import firmware_protocol as fp
 from dthc_bridge.conformance import CHECK_NAMES, ConformanceOptions, run_suite
 from dthc_bridge.conformance.checks_motion import audit_input_events
 from dthc_bridge.conformance.checks_telemetry import count_losses
+from dthc_bridge.conformance.cli import add_arguments, options_from_args
 from dthc_bridge.conformance.context import InputRecord
 from dthc_bridge.conformance.errors import OutsideWindow
 from dthc_bridge.conformance.window import MotionWindow
@@ -51,6 +54,35 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
     assert "--allow-torch-relay" in checks["lease_expiry"].hint
     assert checks["lease_idle_lapse"].values["detail"] == fp.LEASE_DETAIL_IDLE
     assert sim.board.firmware.torch_on is False
+
+
+@pytest.mark.slow
+async def test_only_runs_the_named_checks_and_skips_the_rest() -> None:
+    """``--only telemetry_gaps`` runs the handshake, the set-up and the telemetry step (the
+    checks measured in the same window report too); every other check is skipped as not
+    selected, and an unknown name is refused naming the option."""
+    sim = RealtimeSimBoard(SimulatedBoard("flat_clean", 12))
+    options = ConformanceOptions(
+        link="sim://conf-only", start_z_mm=25.0, rtt_limit_ms=100.0, telemetry_s=1.0,
+        rtt_queries=50, only=("telemetry_gaps",),
+    )  # fmt: skip
+    async with sim.running():
+        report = await run_suite(options, opener=sim.opener)
+    verdicts = {c.name: c.passed for c in report.checks}
+    assert list(verdicts) == list(CHECK_NAMES)
+    ran = {"handshake", "protocol_version", "telemetry_rate", "telemetry_jitter",
+           "telemetry_gaps", "status_rtt"}  # fmt: skip
+    assert {n for n, v in verdicts.items() if v is not None} == ran
+    assert verdicts["telemetry_gaps"] is True
+    assert all(c.figure == "not selected (--only)" for c in report.checks if c.name not in ran)
+    with pytest.raises(ValueError, match="--only: no check named telemetry_gap "):
+        options_from_args(argparse.Namespace(**{**vars(_default_args()), "only": "telemetry_gap"}))
+
+
+def _default_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args(["/dev/null"])
 
 
 async def test_unopenable_link_fails_the_handshake_and_skips_the_rest() -> None:

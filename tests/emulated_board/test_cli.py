@@ -67,3 +67,27 @@ def test_the_nano_has_no_vtof_build(
     argv = ["--pty", str(tmp_path / "board"), "--mcu", "atmega328p", "--arc-input", "vtof"]
     assert cli.main(argv) == cli.EXIT_SETUP
     assert "no V-to-F arc input" in capsys.readouterr().err
+
+
+def test_bootloader_runs_arduinos_bootloader_with_the_flashed_hex(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """``--bootloader`` execs the host with Arduino's bootloader HEX for the MCU and no ELF
+    (``--flash HEX`` passed through; without it the application is erased); ``--flash``
+    alone is refused."""
+    calls: list[list[str]] = []
+    monkeypatch.setattr(cli, "ensure_built", lambda root, firmware: None)
+    monkeypatch.setattr(os, "execv", lambda path, argv: calls.append(argv))
+    monkeypatch.setattr(cli, "arduino_bootloader", lambda mcu: Path(f"/boot/{mcu}.hex"))
+    pty = str(tmp_path / "board")
+    cli.main(["--pty", pty, "--mcu", "atmega328p", "--bootloader", "--flash", "app.hex"])
+    (argv,) = calls
+    assert "--elf" not in argv
+    assert argv[argv.index("--bootloader") + 1] == "/boot/atmega328p.hex"
+    assert argv[argv.index("--flash") + 1] == "app.hex"
+    calls.clear()
+    cli.main(["--pty", pty, "--bootloader"])
+    assert "--flash" not in calls[0]
+    with pytest.raises(SystemExit):
+        cli.main(["--pty", pty, "--flash", "app.hex"])
+    assert "--flash needs --bootloader" in capsys.readouterr().err

@@ -4,6 +4,9 @@
  * bytes out), STEP/DIR counted into a physical Z, the torch relay and ohmic-enable outputs,
  * the inputs (active LOW) and the arc ADC channel, set at each conversion.
  */
+#include <errno.h>
+#include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -439,32 +442,142 @@ static void reset_hook(avr_t *avr)
 
 static void after_reset(struct emu *e, const char *why);
 
+static int hex_nibble(int c)
+{
+	if (c >= '0' && c <= '9')
+		return c - '0';
+	if (c >= 'A' && c <= 'F')
+		return c - 'A' + 10;
+	if (c >= 'a' && c <= 'f')
+		return c - 'a' + 10;
+	return -1;
+}
+
+/* Intel HEX into flash at its addresses (records 00 data, 01 end, 02 and 04 address bases;
+ * 03 and 05, start addresses, mean nothing to an AVR and are skipped: simavr's own reader
+ * refuses 03, which Arduino's optiboot HEX carries). Every checksum is checked. The lowest
+ * address written in *lowest (may be NULL). */
+static int load_hex(struct emu *e, const char *path, uint32_t *lowest)
+{
+	FILE *f = fopen(path, "r");
+	if (!f) {
+		fprintf(stderr, "dthc-emulated-board-host: cannot read %s: %s\n", path,
+			strerror(errno));
+		return -1;
+	}
+	char line[600];
+	uint32_t base = 0, low = UINT32_MAX;
+	int lineno = 0, done = 0, bad = 0;
+	while (!done && !bad && fgets(line, sizeof line, f)) {
+		lineno++;
+		size_t len = strcspn(line, "\r\n");
+		if (len == 0)
+			continue;
+		uint8_t rec[264];
+		size_t n = 0;
+		if (line[0] != ':' || (len - 1) % 2 || (len - 1) / 2 > sizeof rec || len < 11) {
+			bad = 1;
+			break;
+		}
+		uint8_t sum = 0;
+		for (size_t k = 1; k < len; k += 2) { /* len - 1 is even */
+			int hi = hex_nibble(line[k]), lo = hex_nibble(line[k + 1]);
+			if (hi < 0 || lo < 0) {
+				bad = 1;
+				break;
+			}
+			rec[n] = (uint8_t)(hi << 4 | lo);
+			sum = (uint8_t)(sum + rec[n]);
+			n++;
+		}
+		if (bad || sum != 0 || n != (size_t)rec[0] + 5) {
+			bad = 1;
+			break;
+		}
+		uint32_t count = rec[0], offset = (uint32_t)rec[1] << 8 | rec[2];
+		const uint8_t *data = rec + 4;
+		switch (rec[3]) {
+		case 0x00: {
+			uint32_t at = base + offset;
+			if ((uint64_t)at + count > (uint64_t)e->avr->flashend + 1) {
+				fprintf(stderr, "dthc-emulated-board-host: %s:%d: address 0x%x is beyond "
+					"the %s's flash\n", path, lineno, (unsigned)at, e->mcu);
+				fclose(f);
+				return -1;
+			}
+			memcpy(e->avr->flash + at, data, count);
+			if (count && at < low)
+				low = at;
+			break;
+		}
+		case 0x01: done = 1; break;
+		case 0x02: base = ((uint32_t)data[0] << 8 | data[1]) << 4; break;
+		case 0x04: base = ((uint32_t)data[0] << 8 | data[1]) << 16; break;
+		case 0x03:
+		case 0x05: break;
+		default: bad = 1; break;
+		}
+	}
+	fclose(f);
+	if (bad || !done || low == UINT32_MAX) {
+		fprintf(stderr, "dthc-emulated-board-host: %s:%d: not an Intel HEX image\n", path,
+			lineno);
+		return -1;
+	}
+	if (lowest)
+		*lowest = low;
+	return 0;
+}
+
 int board_init(struct emu *e)
 {
 	elf_firmware_t fw;
 	memset(&fw, 0, sizeof fw);
-	if (access(e->elf_path, R_OK) != 0) {
-		fprintf(stderr, "dthc-emulated-board-host: cannot read the firmware ELF %s\n",
-			e->elf_path);
-		return -1;
+	if (e->elf_path) {
+		if (access(e->elf_path, R_OK) != 0) {
+			fprintf(stderr, "dthc-emulated-board-host: cannot read the firmware ELF %s\n",
+				e->elf_path);
+			return -1;
+		}
+		if (elf_read_firmware(e->elf_path, &fw) != 0) {
+			fprintf(stderr,
+				"dthc-emulated-board-host: %s is not a firmware ELF simavr can load\n",
+				e->elf_path);
+			return -1;
+		}
+		if (fw.mmcu[0] && strcmp(fw.mmcu, e->mcu) != 0)
+			fprintf(stderr,
+				"dthc-emulated-board-host: warning: the ELF says mcu %s, running %s\n",
+				fw.mmcu, e->mcu);
 	}
-	if (elf_read_firmware(e->elf_path, &fw) != 0) {
-		fprintf(stderr, "dthc-emulated-board-host: %s is not a firmware ELF simavr can load\n",
-			e->elf_path);
-		return -1;
-	}
-	if (fw.mmcu[0] && strcmp(fw.mmcu, e->mcu) != 0)
-		fprintf(stderr, "dthc-emulated-board-host: warning: the ELF says mcu %s, running %s\n",
-			fw.mmcu, e->mcu);
 	e->avr = avr_make_mcu_by_name(e->mcu);
 	if (!e->avr) {
 		fprintf(stderr, "dthc-emulated-board-host: simavr does not know mcu %s\n", e->mcu);
 		return -1;
 	}
 	avr_init(e->avr);
-	fw.frequency = EMU_FREQUENCY_HZ;
-	fw.vcc = fw.avcc = fw.aref = (uint32_t)e->pins->adc_ref_mv;
-	avr_load_firmware(e->avr, &fw);
+	if (e->elf_path) {
+		fw.frequency = EMU_FREQUENCY_HZ;
+		fw.vcc = fw.avcc = fw.aref = (uint32_t)e->pins->adc_ref_mv;
+		avr_load_firmware(e->avr, &fw);
+	} else {
+		/* A board as its bootloader was burned: the application's flash erased, unless
+		 * --flash puts one there (as avrdude left it). */
+		memset(e->avr->flash, 0xFF, e->avr->flashend + 1);
+		if (e->flash_path && load_hex(e, e->flash_path, NULL))
+			return -1;
+	}
+	if (e->bootloader_path) {
+		/* The BOOTRST fuse: every reset starts at the boot section, where the HEX sits;
+		 * the whole flash is code (the bootloader jumps to 0, the application may be
+		 * anywhere below it). */
+		uint32_t boot = 0;
+		if (load_hex(e, e->bootloader_path, &boot))
+			return -1;
+		e->avr->reset_pc = boot;
+		e->avr->pc = boot;
+		e->avr->codeend = e->avr->flashend;
+	}
 	e->avr->frequency = EMU_FREQUENCY_HZ;
 	e->avr->vcc = e->avr->avcc = e->avr->aref = (uint32_t)e->pins->adc_ref_mv;
 	e->avr->sleep = no_sleep;
@@ -578,7 +691,7 @@ void board_apply_inputs(struct emu *e, int force_all)
 	}
 }
 
-void board_reset(struct emu *e, int power_on)
+static void reset_as(struct emu *e, uint8_t mcusr, const char *why)
 {
 	uint64_t before = e->avr->cycle;
 	avr_reset(e->avr);
@@ -586,8 +699,21 @@ void board_reset(struct emu *e, int power_on)
 	e->cycle_base += before - after;
 	e->last_raw_cycle = after;
 	e->avr->state = cpu_Running;
-	e->avr->data[MCUSR_ADDR] = power_on ? MCUSR_PORF : MCUSR_EXTRF;
-	after_reset(e, power_on ? "power_on" : "external_reset");
+	e->avr->data[MCUSR_ADDR] = mcusr;
+	after_reset(e, why);
+}
+
+void board_reset(struct emu *e, int power_on)
+{
+	reset_as(e, power_on ? MCUSR_PORF : MCUSR_EXTRF, power_on ? "power_on" : "external_reset");
+}
+
+/* The port was opened: DTR pulls RESET low through the capacitor (the auto-reset), an
+ * external reset as the button's. */
+void board_auto_reset(struct emu *e)
+{
+	e->auto_resets++;
+	reset_as(e, MCUSR_EXTRF, "auto_reset");
 }
 
 /* After any reset: simavr cleared the I/O registers behind the pins' IRQ values. */

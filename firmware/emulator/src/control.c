@@ -11,6 +11,8 @@
  *   model KEY VALUE        any model option by its command-line name (noise-v, cut-v, ...)
  *   z MM                   put the carriage at Z (a hand on the axis; the firmware is not told)
  *   status                 one line: sim time, Z, outputs, arc, inputs, counters
+ *   peek ADDR N            N (1..4) bytes of data memory at ADDR (a variable's address from
+ *                          avr-nm, less 0x800000), little-endian -> "peek VALUE" (decimal)
  *   reboot                 as SIGUSR2: reset the MCU (external reset), Z kept
  *   quit                   exit as on SIGTERM
  */
@@ -18,6 +20,7 @@
 #include <math.h>
 #include <poll.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -181,6 +184,21 @@ static void command(struct emu *e, char *line)
 		char buf[1024];
 		control_status(e, buf, sizeof buf);
 		reply(e, "%s", buf);
+	} else if (!strcmp(cmd, "peek")) {
+		char *end1 = NULL, *end2 = NULL;
+		unsigned long addr = argc == 3 ? strtoul(argv[1], &end1, 0) : 0;
+		unsigned long n = argc == 3 ? strtoul(argv[2], &end2, 0) : 0;
+		if (argc != 3 || !end1 || *end1 || !end2 || *end2 || n < 1 || n > 4
+		    || addr + n > (unsigned long)e->avr->ramend + 1) {
+			reply(e, "error: usage: peek ADDR N (N 1..4, inside data memory)%s", "");
+			return;
+		}
+		unsigned long v = 0;
+		for (unsigned long i = 0; i < n; i++)
+			v |= (unsigned long)e->avr->data[addr + i] << (8 * i);
+		char buf[32];
+		snprintf(buf, sizeof buf, "%lu", v);
+		reply(e, "peek %s", buf);
 	} else if (!strcmp(cmd, "reboot")) {
 		emu_reboot = 1;
 		reply(e, "ok%s", "");

@@ -103,7 +103,9 @@ struct pin_ref {
 
 struct emu {
 	/* options */
-	const char *elf_path;
+	const char *elf_path;      /* the application as an ELF; NULL with --bootloader */
+	const char *flash_path;    /* --flash: the application as Intel HEX */
+	const char *bootloader_path; /* --bootloader: Arduino's bootloader HEX, auto-reset on */
 	const char *mcu;
 	const char *pty_path;
 	const char *record_path;
@@ -143,6 +145,8 @@ struct emu {
 	/* link */
 	int master_fd;
 	int slave_fd;
+	int open_watch_fd; /* inotify IN_OPEN on the slave (--bootloader: auto-reset), or -1 */
+	uint64_t auto_resets;
 	char pty_name[128];
 	uint8_t rx[EMU_RX_BUFFER];
 	size_t rx_head, rx_len;
@@ -177,6 +181,7 @@ struct emu {
 /* board.c */
 int board_init(struct emu *e);
 void board_reset(struct emu *e, int power_on);
+void board_auto_reset(struct emu *e);
 uint64_t board_cycles(struct emu *e);
 uint64_t board_us(struct emu *e);
 void board_run_until(struct emu *e, uint64_t end_cycles);
@@ -201,6 +206,7 @@ const char *input_name(int i);
 int pty_open(struct emu *e);
 void pty_close(struct emu *e);
 void pty_flush_tx(struct emu *e);
+int pty_opened(struct emu *e);
 
 /* record.c */
 int record_open(struct emu *e);

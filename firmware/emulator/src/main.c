@@ -17,6 +17,7 @@
 #include <string.h>
 #include <sys/prctl.h>
 #include <time.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include "host.h"
@@ -46,6 +47,8 @@ static void usage(FILE *f)
 {
 	fprintf(f,
 		"usage: dthc-emulated-board-host --elf FILE --pty PATH [--mcu atmega2560|atmega328p]\n"
+		"       (or --bootloader HEX [--flash HEX] instead of --elf: Arduino's bootloader at\n"
+		"       the top of flash, the application from HEX or erased, auto-reset on open)\n"
 		"       [--record FILE] [--seed N] [--plate-mm Z] [--warp-mm A --warp-period-s P]\n"
 		"       [--arc-slope-v-mm S] [--cut-v V] [--cut-height-mm H] [--noise-v SIGMA]\n"
 		"       [--arc-ok-delay-ms MS] [--float-travel-mm MM] [--ocv-v V]\n"
@@ -61,11 +64,14 @@ enum {
 	OPT_ELF = 1000, OPT_PTY, OPT_MCU, OPT_RECORD, OPT_SEED, OPT_PLATE, OPT_WARP,
 	OPT_WARP_PERIOD, OPT_SLOPE, OPT_CUT_V, OPT_CUT_H, OPT_NOISE, OPT_ARC_OK_DELAY,
 	OPT_FLOAT_TRAVEL, OPT_OCV, OPT_TRANSFER_MAX, OPT_LOSE_ABOVE, OPT_PILOT_TIMEOUT, OPT_HELP,
-	OPT_SPEED, OPT_ARC_INPUT, OPT_VTOF_ZERO, OPT_VTOF_FULL, OPT_VTOF_FULL_V,
+	OPT_SPEED, OPT_ARC_INPUT, OPT_VTOF_ZERO, OPT_VTOF_FULL, OPT_VTOF_FULL_V, OPT_BOOTLOADER,
+	OPT_FLASH,
 };
 
 static const struct option long_opts[] = {
 	{"elf", required_argument, 0, OPT_ELF},
+	{"bootloader", required_argument, 0, OPT_BOOTLOADER},
+	{"flash", required_argument, 0, OPT_FLASH},
 	{"pty", required_argument, 0, OPT_PTY},
 	{"mcu", required_argument, 0, OPT_MCU},
 	{"record", required_argument, 0, OPT_RECORD},
@@ -137,6 +143,8 @@ static int parse_args(struct emu *e, int argc, char **argv)
 		double *target = NULL;
 		switch (c) {
 		case OPT_ELF: e->elf_path = optarg; continue;
+		case OPT_BOOTLOADER: e->bootloader_path = optarg; continue;
+		case OPT_FLASH: e->flash_path = optarg; continue;
 		case OPT_PTY: e->pty_path = optarg; continue;
 		case OPT_MCU: e->mcu = optarg; continue;
 		case OPT_RECORD: e->record_path = optarg; continue;
@@ -188,9 +196,19 @@ static int parse_args(struct emu *e, int argc, char **argv)
 		fprintf(stderr, "dthc-emulated-board-host: unexpected argument '%s'\n", argv[optind]);
 		return -1;
 	}
-	if (!e->elf_path || !e->pty_path) {
-		fprintf(stderr, "dthc-emulated-board-host: --elf and --pty are required\n");
+	if (!e->pty_path || (!e->elf_path && !e->bootloader_path)) {
+		fprintf(stderr, "dthc-emulated-board-host: --pty and --elf (or --bootloader) are "
+				"required\n");
 		usage(stderr);
+		return -1;
+	}
+	if (e->bootloader_path && e->elf_path) {
+		fprintf(stderr, "dthc-emulated-board-host: --bootloader loads the application with "
+				"--flash HEX (or none: erased), not --elf\n");
+		return -1;
+	}
+	if (e->flash_path && !e->bootloader_path) {
+		fprintf(stderr, "dthc-emulated-board-host: --flash needs --bootloader\n");
 		return -1;
 	}
 	if (!strcmp(e->mcu, "atmega2560"))
@@ -226,6 +244,16 @@ static void read_pty(struct emu *e)
 	}
 }
 
+/* A client opened the port (--bootloader): what the board sent while the port was closed
+ * never reached a closed tty, so it is discarded (the pty's and ours), then the MCU resets
+ * as DTR makes it. */
+static void auto_reset(struct emu *e)
+{
+	tcflush(e->slave_fd, TCIFLUSH);
+	e->tx_len = 0;
+	board_auto_reset(e);
+}
+
 static void say_ready(struct emu *e)
 {
 	if (e->ready)
@@ -244,7 +272,9 @@ static int run(struct emu *e)
 	double t0 = mono_s();
 	uint64_t sim0 = board_cycles(e);
 	e->wall_t0 = t0;
-	struct pollfd pfd[2] = {{.fd = e->master_fd, .events = POLLIN}, {.fd = 0, .events = POLLIN}};
+	struct pollfd pfd[3] = {{.fd = e->master_fd, .events = POLLIN},
+				{.fd = 0, .events = POLLIN},
+				{.fd = e->open_watch_fd, .events = POLLIN}};
 	unsigned slices = 0;
 	while (!emu_stop) {
 		if (emu_reboot) {
@@ -280,9 +310,13 @@ static int run(struct emu *e)
 			board_apply_inputs(e, 0);
 			pty_flush_tx(e);
 			/* Ahead of the wall clock, ppoll below wakes on host bytes at once; behind it
-			 * (catching up), look for them every other slice. */
-			if (slices & 1)
+			 * (catching up), look for them every other slice. An open of the port first:
+			 * what the opener writes reaches the MCU after its reset. */
+			if (slices & 1) {
+				if (pty_opened(e))
+					auto_reset(e);
 				read_pty(e);
+			}
 			uint64_t t = board_us(e);
 			if (t >= e->next_z_record_us) {
 				record_event(e, "z", "%lld",
@@ -300,8 +334,10 @@ static int run(struct emu *e)
 				.tv_sec = (time_t)ahead_s,
 				.tv_nsec = (long)((ahead_s - (double)(time_t)ahead_s) * 1e9)};
 			pfd[1].fd = e->ctl_eof ? -1 : 0;
-			int n = ppoll(pfd, 2, &ts, NULL);
+			int n = ppoll(pfd, 3, &ts, NULL);
 			if (n > 0) {
+				if ((pfd[2].revents & POLLIN) && pty_opened(e))
+					auto_reset(e);
 				if (pfd[0].revents & POLLIN)
 					read_pty(e);
 				if (pfd[1].revents)
@@ -322,7 +358,7 @@ static int run(struct emu *e)
 int main(int argc, char **argv)
 {
 	static struct emu e;
-	e.master_fd = e.slave_fd = -1;
+	e.master_fd = e.slave_fd = e.open_watch_fd = -1;
 	for (int i = 0; i < IN_COUNT; i++)
 		e.in_force[i] = FORCE_AUTO;
 	pid_t parent = getppid();
@@ -356,7 +392,8 @@ int main(int argc, char **argv)
 		pty_close(&e);
 		return 2;
 	}
-	record_event(&e, "start", "%s,%s,%s", e.mcu, e.elf_path, e.pty_name);
+	record_event(&e, "start", "%s,%s,%s", e.mcu,
+		     e.elf_path ? e.elf_path : e.flash_path ? e.flash_path : "erased", e.pty_name);
 	int status = run(&e);
 	record_event(&e, "exit", "%d", status);
 	char buf[1024];

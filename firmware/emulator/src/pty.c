@@ -3,7 +3,16 @@
  * pty.c - UART0's other end: a raw pty whose slave is symlinked at --pty.
  *
  * The host keeps a slave descriptor open itself, so a client closing and reopening the
- * port never makes the master read EIO or poll HUP. The symlink is made under a temporary
+ * port never makes the master read EIO or poll HUP.
+ *
+ * Auto-reset (--bootloader): on a USB Arduino, opening the port asserts DTR, which pulls
+ * RESET low through a capacitor. A pty has no DTR line (its TIOCMSET fails), and with our
+ * own slave descriptor open the master never sees HUP come and go; what is visible is the
+ * open itself: an inotify IN_OPEN watch on the slave's device node fires for every open(2)
+ * of it by any process (ours was opened before the watch), so each open of the port
+ * resets the MCU, as DTR would. A DTR/RTS toggle on an open port (avrdude's -c arduino and
+ * -c wiring do one right after opening) has no pty counterpart: it is not modelled, and
+ * the open's reset stands in for it. The symlink is made under a temporary
  * name and renamed into place, so the path never points at a dead pty.
  */
 #define _GNU_SOURCE
@@ -13,6 +22,7 @@
 #include <limits.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/inotify.h>
 #include <sys/stat.h>
 #include <termios.h>
 #include <unistd.h>
@@ -62,6 +72,15 @@ int pty_open(struct emu *e)
 		return -1;
 	}
 	raw_mode(e->master_fd);
+	if (e->bootloader_path) {
+		e->open_watch_fd = inotify_init1(IN_NONBLOCK | IN_CLOEXEC);
+		if (e->open_watch_fd < 0 ||
+		    inotify_add_watch(e->open_watch_fd, e->pty_name, IN_OPEN) < 0) {
+			fprintf(stderr, "dthc-emulated-board-host: cannot watch %s for opens: %s\n",
+				e->pty_name, strerror(errno));
+			return -1;
+		}
+	}
 	fcntl(e->master_fd, F_SETFL, fcntl(e->master_fd, F_GETFL) | O_NONBLOCK);
 	fcntl(e->master_fd, F_SETFD, FD_CLOEXEC);
 	fcntl(e->slave_fd, F_SETFD, FD_CLOEXEC);
@@ -90,6 +109,9 @@ void pty_close(struct emu *e)
 		if (!strcmp(target, e->pty_name)) /* only our own link: a newer run may own it */
 			unlink(e->pty_path);
 	}
+	if (e->open_watch_fd >= 0)
+		close(e->open_watch_fd);
+	e->open_watch_fd = -1;
 	if (e->master_fd >= 0)
 		close(e->master_fd);
 	if (e->slave_fd >= 0)
@@ -109,4 +131,24 @@ void pty_flush_tx(struct emu *e)
 	e->tx_len -= (size_t)n;
 	if (e->tx_len)
 		memmove(e->tx, e->tx + n, e->tx_len);
+}
+
+/* How many times a client opened the port since the last call (0 without --bootloader). */
+int pty_opened(struct emu *e)
+{
+	if (e->open_watch_fd < 0)
+		return 0;
+	int opens = 0;
+	for (;;) {
+		char buf[4096] __attribute__((aligned(__alignof__(struct inotify_event))));
+		ssize_t n = read(e->open_watch_fd, buf, sizeof buf);
+		if (n <= 0)
+			return opens;
+		for (char *p = buf; p < buf + n;) {
+			const struct inotify_event *ev = (const struct inotify_event *)p;
+			if (ev->mask & IN_OPEN)
+				opens++;
+			p += sizeof *ev + ev->len;
+		}
+	}
 }
