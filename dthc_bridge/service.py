@@ -516,7 +516,7 @@ class ControllerService:
         if isinstance(report, InputChange):
             sequence.on_inputs(report.inputs, report.z_mm, t_s)  # never behind (timeline)
         else:
-            name = _fault_name(report.code)
+            name = _fault_name(report.code, report.detail)
             if report.idle_lapse and not sequence.busy:
                 # The lease ran out with nothing lit and Z at rest (a CPU spike, a stalled
                 # link): the board latched nothing and goes on with the next frame, as the
@@ -633,8 +633,16 @@ def _fault_names(faults: int) -> str:
     return ", ".join(_fault_name(code) for code in range(16) if faults & (1 << code))
 
 
-def _fault_name(code: int) -> str:
+def _fault_name(code: int, detail: int | None = None) -> str:
+    """A fault's name; an INTERNAL one with the self-check that failed (its detail)."""
     try:
-        return fp.FaultCode(code).name
+        name = fp.FaultCode(code).name
     except ValueError:
         return f"fault {code}"
+    if code == fp.FaultCode.INTERNAL and detail is not None:
+        try:
+            check = fp.InternalFault(detail).name.lower().replace("_", " ")
+        except ValueError:
+            check = f"self-check {detail}"
+        name = f"{name} ({check})"
+    return name

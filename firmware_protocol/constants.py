@@ -35,6 +35,7 @@ __all__ = [
     "FilterKind",
     "InputBit",
     "InputMask",
+    "InternalFault",
     "MotionResult",
     "MsgType",
     "NakCode",
@@ -176,6 +177,14 @@ class FaultCode(IntEnum):
     ESTOP = 3
     ARC_LOST = 4
     INTERNAL = 5
+
+
+class InternalFault(IntEnum):
+    """FAULT(INTERNAL).detail (PROTOCOL.md §5): the self-check the board failed."""
+
+    TICK_OVERRUN = 1  # the sample tick fell behind its schedule
+    ADC_INCOMPLETE = 2  # an arc voltage sample's conversions were missing
+    WATCHDOG_NEAR_MISS = 3  # the main loop nearly let the watchdog reset the board
 
 
 class NakCode(IntEnum):

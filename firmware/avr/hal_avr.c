@@ -14,6 +14,7 @@
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/wdt.h>
 #include <util/atomic.h>
 
 #include "../../firmware_protocol/c/dthc_protocol.h"
@@ -307,8 +308,21 @@ void hal_tick_unlock(void)
     ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { TIMSK1 |= _BV(OCIE1A); }
 }
 
+/* Self-check state in the general purpose I/O registers, not RAM (the Nano's is spent):
+ * GPIOR0 the HAL_HEALTH_* bits not yet read (bit 7: an ADC burst is under way), GPIOR1 the
+ * ticks since the main loop last kicked the watchdog. */
+#define HEALTH GPIOR0
+#define HEALTH_ADC_ARMED 0x80u
+#define HAL_HEALTH_ALL (HAL_HEALTH_TICK_OVERRUN | HAL_HEALTH_ADC_INCOMPLETE | HAL_HEALTH_LOOP_STALL)
+#define LOOP_SILENT_TICKS GPIOR1
+/* Three periods behind is an overrun, not jitter (a long interrupt burst delays one tick). */
+#define HAL_TICK_OVERRUN_PERIODS 3u
+/* Half the watchdog's 120 ms: the main loop came that close to a reset. */
+#define HAL_LOOP_STALL_US 60000UL
+
 ISR(TIMER1_COMPA_vect)
 {
+    uint8_t behind = 0;
     TIMSK1 &= (uint8_t)~_BV(OCIE1A); /* never re-entered */
     for (;;) {
         uint32_t t = tick_t_us;
@@ -322,8 +336,34 @@ ISR(TIMER1_COMPA_vect)
             break; /* the next tick is still ahead: its match will fire */
         }
         /* behind by a period: run it now, with its scheduled time */
+        if (++behind >= HAL_TICK_OVERRUN_PERIODS) {
+            HEALTH |= HAL_HEALTH_TICK_OVERRUN;
+        }
     }
     TIMSK1 |= _BV(OCIE1A);
+    if (++LOOP_SILENT_TICKS == 0) {
+        LOOP_SILENT_TICKS = 0xFFu; /* saturates */
+    }
+    if ((uint32_t)LOOP_SILENT_TICKS * tick_period_us >= HAL_LOOP_STALL_US) {
+        HEALTH |= HAL_HEALTH_LOOP_STALL;
+    }
+}
+
+uint8_t hal_health(void)
+{
+    uint8_t health;
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
+    {
+        health = HEALTH & HAL_HEALTH_ALL;
+        HEALTH = (uint8_t)(HEALTH & (uint8_t)~HAL_HEALTH_ALL);
+    }
+    return health;
+}
+
+void hal_watchdog_kick(void)
+{
+    wdt_reset();
+    LOOP_SILENT_TICKS = 0;
 }
 
 static void timer1_init(void)
@@ -446,12 +486,18 @@ uint16_t hal_arc_raw(void)
     {
         sum = adc_sum;
         n = adc_n;
+        if ((HEALTH & HEALTH_ADC_ARMED) && n == 0) {
+            /* Not one conversion of the burst started a period ago completed: the ADC has
+             * stopped. (A burst cut short, at 2 kHz with a late tick, is averaged below.) */
+            HEALTH |= HAL_HEALTH_ADC_INCOMPLETE;
+        }
         adc_sum = 0;
         adc_n = 0;
         adc_left = ADC_BURST;
         if (!(ADCSRA & _BV(ADSC))) {
             ADCSRA |= _BV(ADSC);
         }
+        HEALTH |= HEALTH_ADC_ARMED;
     }
     /* Arc centivolts = counts * Vref_mV * divider / 1024 / 10, from the mean; a whole
      * burst divides by a shift (the usual case: no 40 us division in the tick). */

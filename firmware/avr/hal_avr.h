@@ -7,6 +7,8 @@
 
 void hal_init(void);  /* pins (outputs off), UART, ADC, step timer; interrupts still off */
 void hal_start(void); /* the clock and the sample tick, continuous ADC */
+/* The main loop's watchdog kick; the tick counts the time since it (HAL_HEALTH_LOOP_STALL). */
+void hal_watchdog_kick(void);
 bool hal_uart_rx_pending(void);
 extern volatile uint16_t hal_rx_discarded; /* bytes the receive interrupt discarded */
 

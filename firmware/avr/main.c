@@ -91,7 +91,7 @@ int main(void)
     hal_start();
     sei();
     for (;;) {
-        wdt_reset();
+        hal_watchdog_kick();
         if (board_poll()) {
             continue;
         }

@@ -201,10 +201,26 @@ static void check_lease(void)
     board_latch(DTHC_FAULT_LEASE_EXPIRED, DTHC_LEASE_DETAIL_LATCHED);
 }
 
+/* The hardware layer's self-checks: the lowest failed one latches INTERNAL with its code. */
+static void check_health(void)
+{
+    uint8_t health = hal_health();
+    uint8_t code = DTHC_INTERNAL_TICK_OVERRUN;
+    if (!health) {
+        return;
+    }
+    while (!(health & 1u)) {
+        health >>= 1;
+        code++;
+    }
+    board_latch(DTHC_FAULT_INTERNAL, code);
+}
+
 static void check_safety(void)
 {
     uint16_t in = B.inputs;
     check_lease();
+    check_health();
     if (in & (1u << DTHC_INPUT_BREAKAWAY)) {
         board_latch(DTHC_FAULT_BREAKAWAY, 0);
     }

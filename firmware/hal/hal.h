@@ -58,6 +58,13 @@ bool hal_uart_write(const uint8_t *data, uint16_t n);
 
 void hal_set_torch(bool on);
 void hal_set_ohmic_enable(bool on);
+/* Self-checks the hardware layer failed since the previous call (HAL_HEALTH_* bits, cleared
+ * by the call, read once per tick): the board latches INTERNAL, detail the lowest one's
+ * DTHC_INTERNAL_* code (bit n is code n + 1). */
+#define HAL_HEALTH_TICK_OVERRUN 0x01u  /* the tick fell behind by HAL_TICK_OVERRUN_PERIODS */
+#define HAL_HEALTH_ADC_INCOMPLETE 0x02u /* no conversion completed in a sample period */
+#define HAL_HEALTH_LOOP_STALL 0x04u     /* the watchdog went unkicked past half its timeout */
+uint8_t hal_health(void);
 /* The input snapshot now, in protocol bit order (PROTOCOL.md section 7), active = 1. */
 uint16_t hal_inputs(void);
 /* Arc voltage in centivolts by the front end's nominal scaling (the board calibrates it),

@@ -60,6 +60,13 @@ void fake_run_us(uint32_t us)
     F.now_us = end;
 }
 
+uint8_t hal_health(void)
+{
+    uint8_t health = F.health;
+    F.health = 0;
+    return health;
+}
+
 uint32_t hal_time_us(void)
 {
     return (uint32_t)F.now_us - F.clock_lag_us;

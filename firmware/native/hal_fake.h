@@ -12,6 +12,7 @@ typedef struct {
     uint16_t period_us;
     int tick_locked;
     uint16_t inputs;        /* what hal_inputs returns (protocol order, active = 1) */
+    uint8_t health;         /* what hal_health returns (HAL_HEALTH_* bits), then cleared */
     uint16_t arc_raw;       /* what hal_arc_raw returns */
     uint16_t xy_speed_dmm_s; /* what hal_xy_speed_dmm_s returns */
     uint16_t current_da;    /* the last hal_set_current_da */

@@ -12,6 +12,7 @@
 
 #include "../../firmware_protocol/c/dthc_protocol.h"
 #include "../board/board.h"
+#include "../hal/hal.h"
 #include "hal_fake.h"
 
 /* --- plumbing -------------------------------------------------------------------------- */
@@ -326,6 +327,50 @@ static int test_lease_holds_with_the_clock_behind_the_tick(void)
     CHECK(F.torch, "torch off before the lease with the clock behind the tick");
     run_ms(2);
     CHECK(!F.torch && (faults() & FAULT(LEASE_EXPIRED)), "lease did not expire");
+    return 0;
+}
+
+/* A self-check the hardware layer failed (the fake's health bits: a tick overrun, an ADC
+ * conversion missing, the watchdog nearly starved): the next tick latches INTERNAL with
+ * that check's code, the torch goes out and Z stops; the lowest code wins when several
+ * fail together; FAULT_RESET clears it (the check is past). */
+static int test_a_failed_self_check_latches_internal_with_its_code(void)
+{
+    static const struct {
+        uint8_t health;
+        uint8_t code;
+    } cases[] = {
+        {HAL_HEALTH_TICK_OVERRUN, DTHC_INTERNAL_TICK_OVERRUN},
+        {HAL_HEALTH_ADC_INCOMPLETE, DTHC_INTERNAL_ADC_INCOMPLETE},
+        {HAL_HEALTH_LOOP_STALL, DTHC_INTERNAL_WATCHDOG_NEAR_MISS},
+        {HAL_HEALTH_LOOP_STALL | HAL_HEALTH_ADC_INCOMPLETE, DTHC_INTERNAL_ADC_INCOMPLETE},
+    };
+    unsigned i;
+    for (i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        unsigned mark;
+        const frame_t *f;
+        uint8_t seq;
+        setup(); /* each case on a fresh board */
+        hello();
+        cmd_u8(DTHC_MSG_TORCH, 1);
+        z_move(80000, 20000);
+        run_ms(20);
+        CHECK(F.torch && F.rate > 0, "case %u: torch on and Z moving first", i);
+        mark = n_out;
+        F.health = cases[i].health;
+        run_ms(1);
+        f = last(DTHC_MSG_FAULT, -1, mark);
+        CHECK(!F.torch, "case %u: torch still on after a failed self-check", i);
+        CHECK(faults() & FAULT(INTERNAL), "case %u: INTERNAL not latched", i);
+        CHECK(f && dthc_fault_get_code(f->p) == DTHC_FAULT_INTERNAL
+                  && dthc_fault_get_detail(f->p) == cases[i].code,
+              "case %u: FAULT INTERNAL detail %u expected", i, (unsigned)cases[i].code);
+        run_ms(100);
+        CHECK(F.rate == 0, "case %u: Z still stepping after INTERNAL", i);
+        seq = cmd_u16(DTHC_MSG_FAULT_RESET, FAULT(INTERNAL));
+        CHECK(is_ack(seq, mark), "case %u: FAULT_RESET of INTERNAL refused", i);
+        CHECK(!(faults() & FAULT(INTERNAL)), "case %u: INTERNAL still latched", i);
+    }
     return 0;
 }
 
@@ -1396,6 +1441,7 @@ static const struct {
     T(lease_expiry_within_one_tick),
     T(lease_runs_from_the_frames_arrival),
     T(lease_holds_with_the_clock_behind_the_tick),
+    T(a_failed_self_check_latches_internal_with_its_code),
     T(frames_after_expiry_do_not_revive),
     T(idle_lease_lapse_reported_once_not_latched),
     T(idle_lease_lapse_reported_again_after_renewal),

@@ -106,6 +106,10 @@ extern "C" {
  * board at rest: reported once per lapse, nothing latched, the next valid frame renews it. */
 #define DTHC_LEASE_DETAIL_LATCHED 0
 #define DTHC_LEASE_DETAIL_IDLE 1
+/* FAULT(INTERNAL).detail (PROTOCOL.md section 5): which self-check failed. */
+#define DTHC_INTERNAL_TICK_OVERRUN 1       /* the sample tick fell behind its schedule */
+#define DTHC_INTERNAL_ADC_INCOMPLETE 2     /* an arc voltage sample's conversions missing */
+#define DTHC_INTERNAL_WATCHDOG_NEAR_MISS 3 /* the main loop nearly let the watchdog fire */
 #define DTHC_DEFAULT_ZVEL_EXPIRY_MS 20
 #define DTHC_ZVEL_EXPIRY_MIN_MS 1
 #define DTHC_ZVEL_EXPIRY_MAX_MS 200

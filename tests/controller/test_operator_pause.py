@@ -133,3 +133,17 @@ def test_a_lease_lost_during_a_cut_or_latched_still_latches() -> None:
     assert cutting.m3().ok
     cutting.service._on_report(lease_fault(fp.LEASE_DETAIL_IDLE, cutting.now))
     assert cutting.sequence.state is State.FAULTED  # busy: never taken for an idle lapse
+
+
+def test_an_internal_fault_names_the_self_check_the_board_failed() -> None:
+    """FAULT INTERNAL's detail says which self-check failed: the error the sender and the
+    owner see names it (a tick overrun, an ADC conversion missing, a watchdog near-miss)."""
+    for detail, words in ((1, "tick overrun"), (2, "adc incomplete"), (3, "watchdog near miss")):
+        loop = ready()
+        assert loop.m3().ok
+        internal = 1 << fp.FaultCode.INTERNAL
+        loop.service._on_report(FaultReport(loop.now, fp.FaultCode.INTERNAL, detail, internal, 3))
+        assert loop.sequence.state is State.FAULTED
+        assert loop.sequence.error == f"board fault: INTERNAL ({words})"
+        faulted = [e for e in loop.events if isinstance(e, BoardFaulted)]
+        assert faulted, loop.events

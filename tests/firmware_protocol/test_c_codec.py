@@ -60,6 +60,7 @@ ENUM_PREFIX = {
     "StatusBit": "DTHC_STATUS_",
     "Capability": "DTHC_CAP_",
     "FaultCode": "DTHC_FAULT_",
+    "InternalFault": "DTHC_INTERNAL_",
     "NakCode": "DTHC_NAK_",
     "ResetReason": "DTHC_RESET_",
     "ProbeOutcome": "DTHC_PROBE_",
