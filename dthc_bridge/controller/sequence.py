@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from firmware_protocol.constants import InputMask
@@ -42,6 +42,7 @@ from .commands import (
 )
 from .debounce import Edge, InputDebouncer
 from .height_window import HeightWindow
+from .start_transient import StartTransient
 from .states import HANDLERS, IN_A_CUT, State, StateHandler
 from .thc import Lock, ThcController
 
@@ -93,6 +94,16 @@ class SequenceConfig:
     auto_voltage_min_span_mm: float = 1.0
     auto_voltage_max_residual_v: float = 1.0
     auto_voltage_max_slope_change: float = 0.05  # V/mm, first half - second half
+    # ...and where the fitted slope is within this many standard errors of 0 (a flat
+    # plate), the mean of all those voltages: the line's value at 0 is a few times noisier.
+    auto_voltage_min_slope_t: float = 2.0
+    auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
+    # The start transient, measured over the pierce delay (controller/start_transient.py):
+    # measuring waits until what is left of it is below auto_voltage_max_transient_v (at
+    # most auto_voltage_max_wait_s from arc OK), and what is left is subtracted.
+    auto_voltage_max_transient_v: float = 0.3
+    auto_voltage_max_wait_s: float = 2.0
+    auto_voltage_transient_tau_margin: float = 1.5  # the wait uses 1.5 x the fitted tau
     at_speed_settle_s: float = 0.15
     # The THC's height window (controller/height_window.py): the THC never takes the torch
     # more than this far below cut height, nor above it (toward the arc-loss height, 6-8 mm
@@ -122,6 +133,7 @@ class _Cut:
     # target, and the height window's reference under a G200 V voltage).
     auto_voltage: AutoVoltage | None = None
     cut_height_v: float | None = None  # its estimate, once taken
+    transient: StartTransient = field(default_factory=StartTransient)  # fitted at CUTTING
     start_z_mm: float = math.nan  # Z when CUTTING began at cut height (NaN: a relay cut)
     distance_mm: float = 0.0  # XY travel since the cut started (from the probed point)
     relit: bool = False
@@ -475,6 +487,8 @@ class CutSequence:
             min_span_mm=cfg.auto_voltage_min_span_mm,
             max_residual_v=cfg.auto_voltage_max_residual_v,
             max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
+            min_slope_t=cfg.auto_voltage_min_slope_t,
+            min_slope_v_per_mm=cfg.auto_voltage_min_slope_v_per_mm,
         )
         auto = AutoVoltage(
             window_s=cfg.auto_voltage_window_s,
@@ -792,6 +806,8 @@ class CutSequence:
             # The programmed feed, not the reduced one: an M67 E3 reduction locks THC (PlasmaC).
             self._requested_mm_s = requested_feed_mm_s
         self.thc.observe_speed(xy_speed_mm_s, self._requested_mm_s, now)
+        if self.cut is not None and self.state is State.PIERCE_DELAY:
+            self.cut.transient.add(now, volts)  # torch and gantry still: the transient alone
         dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
         self._last_thc_t = now
         self._handler.on_batch(self, volts, period_s, dt)
@@ -831,10 +847,14 @@ class CutSequence:
         assert cut.auto_voltage is not None
         estimate = cut.auto_voltage
         void = Lock.VOID in self.thc.locks(now)
+        # A noise burst's voltages are left out (the window goes on): 2 V of noise over
+        # 50 ms moved the mean by half a volt.
+        held_v = None if self.thc.noise_burst else self._held_v()
+        estimate.transient = cut.transient
         if cut.cut_height_v is None:
-            measured = estimate.sample(now, self._held_v(), cut.distance_mm, void)
+            measured = estimate.sample(now, held_v, cut.distance_mm, void)
         elif estimate.wants_refining:
-            measured = estimate.refine(now, self._held_v(), cut.distance_mm, void)
+            measured = estimate.refine(now, held_v, cut.distance_mm, void)
         else:
             return
         if measured is None:
@@ -903,6 +923,7 @@ class CutSequence:
         cut = self.cut
         assert cut is not None
         cut.attempts += 1
+        cut.transient = StartTransient()  # a new transfer, a new transient
         self._voltages.clear()
         if not self.config.dry_run and self.torch_enabled:
             self._emit(act.SwitchTorch(True))
@@ -937,6 +958,7 @@ class CutSequence:
         self.last_cut_start_xy = cut.start_xy
         if not cut.relay:  # a relay cut's heights are the program's: no reference height
             cut.start_z_mm = self._z_mm
+        cut.transient.fit()
         self._reset_thc()
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = self.thc_enabled

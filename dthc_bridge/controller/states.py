@@ -404,7 +404,17 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
     fixed_v = seq.params.cut_voltage_v
     if fixed_v is not None and seq.base_v is None:
         seq.base_v = fixed_v  # known from the start: the THC may raise the torch
-    may_measure = now - arc_ok_since >= cfg.auto_voltage_after_s and settled
+    since_arc_ok = now - arc_ok_since
+    # Past the fixed delay, and past the start transient as the pierce measured it.
+    may_measure = (
+        since_arc_ok >= cfg.auto_voltage_after_s
+        and settled
+        and (
+            cut.transient.remnant_v(now, cfg.auto_voltage_transient_tau_margin)
+            <= cfg.auto_voltage_max_transient_v
+            or since_arc_ok >= cfg.auto_voltage_max_wait_s
+        )
+    )
     thc.frozen = seq.base_v is None or arc_lost_running or not delay_done
     thc.rise_only = not arc_lost_running and not delay_done
     if seq.base_v is None:
@@ -416,13 +426,13 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
             thc.frozen = arc_lost_running or not delay_done
         velocity = 0.0
     else:
+        if may_measure:
+            seq._measure_cut_height_v(now)  # a refined target applies from this batch on
         if seq.mode is ThcMode.ARC_OK_AND_UPDOWN:
             thc.filter(volts, period_s, now)
             velocity = _updown_velocity(seq)
         else:
             velocity = thc.update(volts, period_s, now, dt).velocity_mm_s
-        if may_measure:
-            seq._measure_cut_height_v(now)
         if _window_fault(seq, velocity):
             return
         velocity = _window_limit(seq, velocity, dt)
