@@ -135,7 +135,7 @@ def scenario_entry(
                 "ended_by_window": sum(
                     1 for r in runs[kind] for e in r.errors if WINDOW_ERROR in e
                 ),
-                "errors": sorted({e[:60] for r in runs[kind] for e in r.errors}),
+                "errors": sorted({" ".join(e.split())[:60] for r in runs[kind] for e in r.errors}),
             }
             for kind, fig in figures.items()
         }
