@@ -123,6 +123,11 @@ class ControllerSettings(_Closed):
     arc_retry_delay_s: float = Field(_SEQ.arc_retry_delay_s, ge=0.0, le=10.0)
     arc_lost_delay_s: float = Field(_SEQ.arc_lost_delay_s, ge=0.0, le=1.0)
     thc_delay_s: float = Field(_SEQ.thc_delay_s, ge=0.0, le=9.0)
+    # The THC's height window (1 mm below cut height, 4 mm above, by the arc voltage):
+    # reaching an edge ends the cut with an error. Below is kept under 10 mm and above
+    # 0.5 mm, so that it always stops something.
+    thc_window_below_mm: float = Field(_SEQ.thc_window_below_mm, ge=0.2, le=10.0)
+    thc_window_above_mm: float = Field(_SEQ.thc_window_above_mm, ge=0.5, le=20.0)
     safe_height_mm: float = Field(_SEQ.safe_height_mm, gt=0.0, le=100.0)
     pause_at_end_s: float = Field(_SEQ.pause_at_end_s, ge=0.0, le=5.0)
     puddle_height_percent: float = Field(_SEQ.puddle_height_percent, ge=50.0, le=300.0)

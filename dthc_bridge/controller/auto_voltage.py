@@ -18,6 +18,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from .start_transient import StartTransient, fit_through_transient
+
 __all__ = ["AutoVoltage", "FitLimits", "fitted_voltage"]
 
 
@@ -29,6 +31,10 @@ class FitLimits:
     min_span_mm: float
     max_residual_v: float
     max_slope_change_v_per_mm: float  # first half's slope less the second half's
+    min_slope_t: float = 0.0  # a slope within this many standard errors of 0: the mean
+    min_slope_v_per_mm: float = 0.0  # ...or below this (a flat plate's noise): the mean
+    max_transient_correction_v: float = 2.5  # the pierce-and-cut fit, against the mean
+    min_transient_left_v: float = 0.1  # at the window's start, by the pierce's model
 
 
 @dataclass
@@ -38,8 +44,13 @@ class AutoVoltage:
     window_s: float
     fit_window_s: float
     limits: FitLimits | None  # None: no fit, the mean stays
-    volts: list[float] = field(default_factory=list)
+    # The start transient as the pierce measured it: subtracted from every sample, and
+    # fitted again with the cut's samples when the fit window ends.
+    transient: StartTransient = field(default_factory=StartTransient)
+    volts: list[float] = field(default_factory=list)  # the held voltage less the remnant
     distances_mm: list[float] = field(default_factory=list)  # distance cut at each sample
+    times_s: list[float] = field(default_factory=list)
+    held_v: list[float] = field(default_factory=list)  # the held voltage as it came
     since: float | None = None  # the window's start
     mean_v: float | None = None  # the estimate before the fit refined it
     refined: bool = False
@@ -50,15 +61,14 @@ class AutoVoltage:
         """One batch while no target is known: the mean once the window is full, else
         None. A void lock (a kerf, a spike) starts the window again."""
         if void:
-            self.volts.clear()
-            self.distances_mm.clear()
+            for samples in (self.volts, self.distances_mm, self.times_s, self.held_v):
+                samples.clear()
             self.since = None
             return None
         if self.since is None:
             self.since = now
         if filtered_v is not None:
-            self.volts.append(filtered_v)
-            self.distances_mm.append(distance_mm)
+            self._keep(now, filtered_v, distance_mm)
         if now - self.since >= self.window_s and self.volts:
             self.mean_v = sum(self.volts) / len(self.volts)
             return self.mean_v
@@ -78,21 +88,72 @@ class AutoVoltage:
             self.refined = True
             return None
         if held_v is not None and not void:
-            self.volts.append(held_v)
-            self.distances_mm.append(distance_mm)
+            self._keep(now, held_v, distance_mm)
         if now - self.since < self.fit_window_s:
             return None
         self.refined = True
-        return fitted_voltage(self.distances_mm, self.volts, self.limits)
+        line = line_fit(self.distances_mm, self.volts, self.limits)
+        return self._through_transient(self.limits, line) or (None if line is None else line[0])
+
+    def _keep(self, now: float, held_v: float, distance_mm: float) -> None:
+        self.times_s.append(now)
+        self.held_v.append(held_v)
+        self.volts.append(held_v - self.transient.remnant_v(now))
+        self.distances_mm.append(distance_mm)
+
+    def _through_transient(
+        self, limits: FitLimits, line: tuple[float, float] | None
+    ) -> float | None:
+        """The pierce's and the cut's voltages fitted together (start_transient): with a
+        plate slope where the line fit found one, else flat (a line through a decay's tail
+        and noise over 30 mm is mostly noise: measured, docs/benchmarks.md); None where
+        there is no pierce model or it does not fit (the line fit alone then decides)."""
+        args = (self.transient, self.times_s, self.distances_mm, self.held_v)
+        # Only where a decay may still be going on (the pierce's model leaves some of it at
+        # the window's start, or found none in the noise): otherwise the line fit is the
+        # better judge, and a decay term would take up the plate's drift.
+        transient = self.transient
+        decaying = transient.overshoot_v <= 0.0 or (
+            bool(self.times_s)
+            and transient.remnant_v(self.times_s[0]) >= limits.min_transient_left_v
+        )
+        flat_plate = line is not None and line[1] == 0.0
+        if not decaying:
+            return None
+        if line is not None and not flat_plate:
+            sloped = fit_through_transient(*args, with_slope=True)
+            if sloped is not None and _plausible(sloped, limits):
+                return sloped[0]
+        flat = fit_through_transient(*args, with_slope=False)
+        if flat is None or not _plausible(flat, limits) or self.mean_v is None:
+            return None
+        # A flat fit far from the first mean took a plate's drift for the decay's tail.
+        if abs(flat[0] - self.mean_v) > limits.max_transient_correction_v:
+            return None
+        return flat[0]
+
+
+def _plausible(fit: tuple[float, float, float], limits: FitLimits) -> bool:
+    _, slope, residual = fit
+    return abs(slope) <= limits.max_plate_slope_v_per_mm and residual <= limits.max_residual_v
 
 
 def fitted_voltage(
     distances_mm: Sequence[float], volts: Sequence[float], limits: FitLimits
 ) -> float | None:
+    """See :func:`line_fit`: its voltage."""
+    fit = line_fit(distances_mm, volts, limits)
+    return None if fit is None else fit[0]
+
+
+def line_fit(
+    distances_mm: Sequence[float], volts: Sequence[float], limits: FitLimits
+) -> tuple[float, float] | None:
     """The voltage at distance 0 by a least-squares line through (distance, volts), or None
     where the line is implausible: fewer than 3 samples, too short a span, too steep a
     plate, halves that disagree (a start transient still decaying, a bend in the plate),
-    too much scatter."""
+    too much scatter. ``(voltage, slope)``: a slope of 0 where the mean is returned (a
+    slope not told from noise)."""
     n = len(volts)
     if n < 3:
         return None
@@ -114,7 +175,12 @@ def fitted_voltage(
     residual = math.sqrt(sum((v - a - b * d) ** 2 for d, v in pairs) / n)
     if residual > limits.max_residual_v:
         return None
-    return a
+    # No slope to tell from noise (a flat plate): the mean, a few times less noisy than
+    # the line's value at distance 0.
+    slope_error = residual * math.sqrt(n / max(1, n - 2) / sdd)
+    if abs(b) < max(limits.min_slope_t * slope_error, limits.min_slope_v_per_mm):
+        return mean_v, 0.0
+    return a, b
 
 
 def _slope(distances_mm: Sequence[float], volts: Sequence[float]) -> float | None:

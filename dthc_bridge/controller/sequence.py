@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from firmware_protocol.constants import InputMask
@@ -41,6 +41,8 @@ from .commands import (
     ThcMode,
 )
 from .debounce import Edge, InputDebouncer
+from .height_window import HeightWindow
+from .start_transient import StartTransient
 from .states import HANDLERS, IN_A_CUT, State, StateHandler
 from .thc import Lock, ThcController
 
@@ -92,7 +94,24 @@ class SequenceConfig:
     auto_voltage_min_span_mm: float = 1.0
     auto_voltage_max_residual_v: float = 1.0
     auto_voltage_max_slope_change: float = 0.05  # V/mm, first half - second half
+    # ...and where the fitted slope is within this many standard errors of 0 (a flat
+    # plate), the mean of all those voltages: the line's value at 0 is a few times noisier.
+    auto_voltage_min_slope_t: float = 2.0
+    auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
+    # The start transient, measured over the pierce delay (controller/start_transient.py):
+    # measuring waits until what is left of it is below auto_voltage_max_transient_v (at
+    # most auto_voltage_max_wait_s from arc OK), and what is left is subtracted.
+    auto_voltage_max_transient_v: float = 0.3
+    auto_voltage_max_wait_s: float = 2.0
+    auto_voltage_transient_tau_margin: float = 1.5  # the wait uses 1.5 x the fitted tau
     at_speed_settle_s: float = 0.15
+    # The THC's height window (controller/height_window.py): the THC never takes the torch
+    # more than this far below cut height, nor above it (toward the arc-loss height, 6-8 mm
+    # stand-off), by the arc voltage against the voltage measured at cut height; reaching
+    # an edge ends the cut through the fault path. 1 mm below a 1.5 mm cut height leaves
+    # 0.5 mm above the plate; 4 mm above stays under the arc loss and over a kerf's rise.
+    thc_window_below_mm: float = 1.0
+    thc_window_above_mm: float = 4.0
     dry_run: bool = False
     # Mode 0 (arc OK from voltage): window and agreement, docs/plasma-facts.md
     arc_ok_low_v: float = 60.0
@@ -110,7 +129,12 @@ class _Cut:
     arc_lost_since: float | None = None
     at_speed_since: float | None = None
     thc_lift_mm: float = 0.0  # how far THC raised the torch above the cut datum
-    auto_voltage: AutoVoltage | None = None  # this cut's estimate, without a G200 V voltage
+    # The voltage at cut height over the probed point, measured on every cut (the auto
+    # target, and the height window's reference under a G200 V voltage).
+    auto_voltage: AutoVoltage | None = None
+    cut_height_v: float | None = None  # its estimate, once taken
+    transient: StartTransient = field(default_factory=StartTransient)  # fitted at CUTTING
+    start_z_mm: float = math.nan  # Z when CUTTING began at cut height (NaN: a relay cut)
     distance_mm: float = 0.0  # XY travel since the cut started (from the probed point)
     relit: bool = False
     ohmic_failed: int = 0
@@ -463,6 +487,8 @@ class CutSequence:
             min_span_mm=cfg.auto_voltage_min_span_mm,
             max_residual_v=cfg.auto_voltage_max_residual_v,
             max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
+            min_slope_t=cfg.auto_voltage_min_slope_t,
+            min_slope_v_per_mm=cfg.auto_voltage_min_slope_v_per_mm,
         )
         auto = AutoVoltage(
             window_s=cfg.auto_voltage_window_s,
@@ -780,6 +806,8 @@ class CutSequence:
             # The programmed feed, not the reduced one: an M67 E3 reduction locks THC (PlasmaC).
             self._requested_mm_s = requested_feed_mm_s
         self.thc.observe_speed(xy_speed_mm_s, self._requested_mm_s, now)
+        if self.cut is not None and self.state is State.PIERCE_DELAY:
+            self.cut.transient.add(now, volts)  # torch and gantry still: the transient alone
         dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
         self._last_thc_t = now
         self._handler.on_batch(self, volts, period_s, dt)
@@ -802,34 +830,44 @@ class CutSequence:
         supersede its moves on the board)."""
         return self.in_relay_cut and not self.thc_enabled
 
-    def _acquire_target(self, now: float) -> None:
-        """The cut's voltage: G200 V at once, else auto voltage's first estimate."""
+    def _held_v(self) -> float | None:
+        """The filtered voltage less what Z moved since the cut began: what a torch held at
+        cut height would read."""
         cut = self.cut
-        assert cut is not None
-        fixed = self.params.cut_voltage_v
-        if fixed is not None:
-            self.base_v = fixed
-            return
-        assert cut.auto_voltage is not None
-        void = Lock.VOID in self.thc.locks(now)
-        mean_v = cut.auto_voltage.sample(now, self.thc.filtered_v, cut.distance_mm, void)
-        if mean_v is not None:
-            self.base_v = mean_v
-
-    def _refine_auto_target(self, now: float) -> None:
-        """Auto voltage's one correction by the line fit, from the voltage a held torch
-        would read (less what the THC moved Z from cut height)."""
-        cut = self.cut
-        assert cut is not None
-        assert cut.auto_voltage is not None
         filtered = self.thc.filtered_v
-        held_v = None
-        if filtered is not None:
-            held_v = filtered - self.thc.config.slope_v_per_mm * (self._z_mm - self._cut_z())
+        if cut is None or filtered is None or math.isnan(cut.start_z_mm):
+            return filtered
+        return filtered - self.thc.config.slope_v_per_mm * (self._z_mm - cut.start_z_mm)
+
+    def _measure_cut_height_v(self, now: float) -> None:
+        """One batch of the cut-height voltage's measurement (every cut): the mean first,
+        then auto voltage's one correction by the line fit; an auto target follows it."""
+        cut = self.cut
+        assert cut is not None
+        assert cut.auto_voltage is not None
+        estimate = cut.auto_voltage
         void = Lock.VOID in self.thc.locks(now)
-        fitted = cut.auto_voltage.refine(now, held_v, cut.distance_mm, void)
-        if fitted is not None and self._base_v is not None:
-            self.base_v = fitted
+        # A noise burst's voltages are left out (the window goes on): 2 V of noise over
+        # 50 ms moved the mean by half a volt.
+        held_v = None if self.thc.noise_burst else self._held_v()
+        estimate.transient = cut.transient
+        if cut.cut_height_v is None:
+            measured = estimate.sample(now, held_v, cut.distance_mm, void)
+        elif estimate.wants_refining:
+            measured = estimate.refine(now, held_v, cut.distance_mm, void)
+        else:
+            return
+        if measured is None:
+            return
+        cut.cut_height_v = measured
+        if self.params.cut_voltage_v is None:
+            self.base_v = measured
+
+    def height_window(self) -> HeightWindow:
+        cfg = self.config
+        return HeightWindow(
+            cfg.thc_window_below_mm, cfg.thc_window_above_mm, self.thc.config.slope_v_per_mm
+        )
 
     # --- steps -----------------------------------------------------------------------------
 
@@ -885,6 +923,7 @@ class CutSequence:
         cut = self.cut
         assert cut is not None
         cut.attempts += 1
+        cut.transient = StartTransient()  # a new transfer, a new transient
         self._voltages.clear()
         if not self.config.dry_run and self.torch_enabled:
             self._emit(act.SwitchTorch(True))
@@ -917,6 +956,9 @@ class CutSequence:
         assert cut is not None
         self._enter(State.CUTTING)
         self.last_cut_start_xy = cut.start_xy
+        if not cut.relay:  # a relay cut's heights are the program's: no reference height
+            cut.start_z_mm = self._z_mm
+        cut.transient.fit()
         self._reset_thc()
         self.thc.set_speed_limit(self.thc_z_feed_mm_min)
         self.thc.enabled = self.thc_enabled

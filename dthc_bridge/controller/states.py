@@ -10,6 +10,7 @@ going down) are the sequence's, before any handler.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from enum import StrEnum
 from typing import TYPE_CHECKING
@@ -400,29 +401,41 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
     arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
     delay_done = now - arc_ok_since >= cfg.thc_delay_s
     arc_lost_running = cut.arc_lost_since is not None or not seq.torch_enabled or cut.torch_out
-    if seq.params.cut_voltage_v is not None and seq.base_v is None:
-        seq._acquire_target(now)  # known from the start: the THC may raise the torch
-    may_acquire = now - arc_ok_since >= cfg.auto_voltage_after_s
+    fixed_v = seq.params.cut_voltage_v
+    if fixed_v is not None and seq.base_v is None:
+        seq.base_v = fixed_v  # known from the start: the THC may raise the torch
+    since_arc_ok = now - arc_ok_since
+    # Past the fixed delay, and past the start transient as the pierce measured it.
+    may_measure = (
+        since_arc_ok >= cfg.auto_voltage_after_s
+        and settled
+        and (
+            cut.transient.remnant_v(now, cfg.auto_voltage_transient_tau_margin)
+            <= cfg.auto_voltage_max_transient_v
+            or since_arc_ok >= cfg.auto_voltage_max_wait_s
+        )
+    )
     thc.frozen = seq.base_v is None or arc_lost_running or not delay_done
     thc.rise_only = not arc_lost_running and not delay_done
-    if (
-        seq.params.cut_voltage_v is None
-        and cut.auto_voltage is not None
-        and cut.auto_voltage.wants_refining
-        and settled
-    ):
-        seq._refine_auto_target(now)
-    if may_acquire and settled and seq.base_v is None:
+    if seq.base_v is None:
+        # Auto voltage, no target yet: Z holds at cut height while it is measured.
         thc.filter(volts, period_s, now)
-        seq._acquire_target(now)
+        if may_measure:
+            seq._measure_cut_height_v(now)
         if seq.base_v is not None:
             thc.frozen = arc_lost_running or not delay_done
         velocity = 0.0
-    elif seq.mode is ThcMode.ARC_OK_AND_UPDOWN:
-        thc.filter(volts, period_s, now)
-        velocity = _updown_velocity(seq)
     else:
-        velocity = thc.update(volts, period_s, now, dt).velocity_mm_s
+        if may_measure:
+            seq._measure_cut_height_v(now)  # a refined target applies from this batch on
+        if seq.mode is ThcMode.ARC_OK_AND_UPDOWN:
+            thc.filter(volts, period_s, now)
+            velocity = _updown_velocity(seq)
+        else:
+            velocity = thc.update(volts, period_s, now, dt).velocity_mm_s
+        if _window_fault(seq, velocity):
+            return
+        velocity = _window_limit(seq, velocity, dt)
     z_next = seq._z_mm + velocity * dt
     if velocity < 0 and z_next <= cfg.z_min_mm:
         seq._fault("Z min limit reached during THC")
@@ -432,6 +445,37 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
         return
     cut.thc_lift_mm = max(cut.thc_lift_mm, seq._z_mm - seq._cut_z())
     seq._emit(act.SetZVelocity(velocity))
+
+
+def _window_offset_mm(seq: CutSequence) -> float | None:
+    """The torch's height over cut height by the arc, while the THC drives Z, else None."""
+    cut = seq.cut
+    thc = seq.thc
+    voltage = thc.filtered_v
+    if cut is None or cut.cut_height_v is None or voltage is None or math.isnan(cut.start_z_mm):
+        return None  # not measured yet, or a relay cut (no cut height of ours)
+    if not seq.thc_enabled or thc.frozen or thc.held:
+        return None
+    # The window is around the cut height in force: the operator's offset and height
+    # override move it with the target.
+    return seq.height_window().offset_mm(voltage, cut.cut_height_v + seq._override_v())
+
+
+def _window_fault(seq: CutSequence, command_mm_s: float) -> bool:
+    offset = _window_offset_mm(seq)
+    if offset is None:
+        return False
+    reason = seq.height_window().breach(offset, command_mm_s)
+    if reason is not None:
+        seq._fault(reason)
+    return reason is not None
+
+
+def _window_limit(seq: CutSequence, velocity_mm_s: float, dt: float) -> float:
+    offset = _window_offset_mm(seq)
+    if offset is None:
+        return velocity_mm_s
+    return seq.height_window().limit(velocity_mm_s, offset, dt, seq.thc.config.max_accel_mm_s2)
 
 
 def _updown_velocity(seq: CutSequence) -> float:

@@ -431,6 +431,12 @@ class ThcController:
         return void is not None and void.locked
 
     @property
+    def noise_burst(self) -> bool:
+        """A noise burst is on (see ``noise_ref_v``): its voltages are no measurement."""
+        ref = self.config.noise_ref_v
+        return ref > 0.0 and self._s.noise_v > ref
+
+    @property
     def slow_target_v(self) -> float | None:
         """The temporary target while following a steady slow-down, else None."""
         return self._s.slow_target_v

@@ -132,6 +132,9 @@ class ControllerResult:
     planned_cuts: int = 0
     pauses: list[str] = field(default_factory=list)  # the controller paused the program
     void: VoidLockTally = field(default_factory=VoidLockTally)
+    # Per cut that measured one: the controller's voltage at cut height (ours: measured on
+    # every cut; plasmac: its auto volts target) less the plant's true one, in volts.
+    target_errors_v: list[float] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, object]:
         n = sum(c.measured_samples for c in self.cuts)
@@ -168,7 +171,20 @@ class ControllerResult:
             "false_locks": self.void.false_locks,
             "void_locked_s": round(self.void.locked_s, 3),
             "longest_void_lock_s": round(self.void.longest_s, 3),
+            "target_error_v": _error_figures(self.target_errors_v),
         }
+
+
+def _error_figures(errors_v: Sequence[float]) -> dict[str, object] | None:
+    """Mean (signed), mean and max absolute error of the cut-height voltages, in volts."""
+    if not errors_v:
+        return None
+    return {
+        "cuts": len(errors_v),
+        "mean_v": round(sum(errors_v) / len(errors_v), 3),
+        "mean_abs_v": round(sum(abs(e) for e in errors_v) / len(errors_v), 3),
+        "max_abs_v": round(max(abs(e) for e in errors_v), 3),
+    }
 
 
 def merge(results: Sequence[ControllerResult]) -> ControllerResult:
@@ -189,6 +205,7 @@ def merge(results: Sequence[ControllerResult]) -> ControllerResult:
         merged.void.false_locks += r.void.false_locks
         merged.void.locked_s += r.void.locked_s
         merged.void.longest_s = max(merged.void.longest_s, r.void.longest_s)
+        merged.target_errors_v += r.target_errors_v
         merged.completed_cuts += r.completed_cuts
         merged.planned_cuts += r.planned_cuts
     return merged

@@ -118,6 +118,11 @@ class Arc:
         self._ok_bounce_end_t = math.inf
         self._ok_switched = True
 
+    def voltage_at_height_v(self, height_mm: float) -> float:
+        """The settled voltage at ``height_mm`` over metal at full feed, without noise: the
+        truth an auto-voltage estimate is judged against (benchmarks only)."""
+        return self._v0 + self._slope * height_mm
+
     @property
     def gap_voltage_v(self) -> float:
         """What an old kerf or a void under the tip adds to the voltage now (0 over metal

@@ -94,6 +94,14 @@ class MaterialSpec:
     pierce_height_mm: float = _num(3.8, gt=0.0)
     cut_feed_mm_min: float = _num(5500.0, gt=0.0)
     kerf_width_mm: float = _num(1.5, gt=0.0)
+    # The cut voltage the operator enters (G200 V, plasmac's cut volts) when it is not the
+    # arc's voltage at cut height (``cut_voltage_v``): a wrong chart or a typo. None: the same.
+    entered_voltage_v: float | None = _num(None, gt=0.0)
+
+    @property
+    def programmed_voltage_v(self) -> float:
+        """What a controller is given as the cut voltage."""
+        return self.cut_voltage_v if self.entered_voltage_v is None else self.entered_voltage_v
 
 
 @dataclass(frozen=True, slots=True)

@@ -298,3 +298,36 @@ def test_ours_can_be_retuned_from_the_command_line(capsys: pytest.CaptureFixture
     assert default["scenarios"][0]["reference"] == tuned["scenarios"][0]["reference"]  # type: ignore[index]
     with pytest.raises(SystemExit, match="unknown ThcConfig field"):
         cli.main([*base, "--ours", "gain=3"])
+
+
+def test_control_reports_the_height_window_and_the_cut_height_voltage(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Issue 35: on wrong_cut_voltage (G200 V 15 V under the arc's) ours ends the cut at the
+    height window before the plate, the goals say so; every controller's voltage at cut
+    height is reported against the plant's true one."""
+    code, report = run_main(
+        capsys, "control", "--json", "--scenarios", "wrong_cut_voltage,flat_clean",
+        "--seeds", "1", "--max-path-mm", "250", "--jobs", "1",
+        "--controllers", "ours,ours_auto,no_thc",
+    )  # fmt: skip
+    assert code == 0
+    window = report["height_window"]
+    assert isinstance(window, dict)
+    assert window["ours"]["ended_by_window"] == 1
+    assert window["ours"]["touches"] == 0
+    assert window["ours"]["min_height_mm"] > 0.25
+    goals = report["goals"]
+    assert isinstance(goals, dict)
+    for name in (
+        "height_window_touches",
+        "height_window_min_height_mm",
+        "height_window_cuts_ended",
+    ):
+        assert goals[name]["pass"] is True, name
+    errors = report["target_error_v"]
+    assert isinstance(errors, dict)
+    flat = errors["flat_clean"]
+    assert {"ours", "ours_auto"} <= flat.keys()  # measured with either voltage
+    assert abs(flat["ours_auto"]["mean_v"]) < 1.0
+    assert report["scenarios"][0]["in_goals"] is False  # type: ignore[index]

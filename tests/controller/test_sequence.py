@@ -168,8 +168,10 @@ def test_breakaway_mid_cut_faults() -> None:
 
 
 def test_float_contact_mid_cut_faults_before_a_crash() -> None:
-    """A target voltage far too low drives the torch down: the float switch ends the cut."""
-    loop = ready(cut_voltage_v=95.0)
+    """A target voltage far too low, with the height window opened to its widest, drives
+    the torch down: the float switch ends the cut (the window's own test:
+    tests/controller/test_height_window.py)."""
+    loop = ready(cut_voltage_v=95.0, config=SequenceConfig(thc_window_below_mm=10.0))
     assert loop.m3().ok
     assert not loop.move("G1 X400 Y50 F5500", max_s=10)
     assert "float switch during the cut" in loop.sequence.error

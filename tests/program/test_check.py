@@ -241,7 +241,7 @@ def test_rosetta_g100_p6_cut() -> None:
     cut = only(report)
     assert cut.parameters == "G100 P6"
     assert (cut.pierce_height_mm, cut.pierce_delay_s, cut.cut_height_mm) == (3.8, 0.4, 1.5)
-    assert cut.target_v == 121.0  # G100 P5 A0 B121
+    assert cut.target_v == 128.0  # G100 P5 A0 B128
     assert cut.thc  # G100 P7 A1
     assert not report.warnings
 

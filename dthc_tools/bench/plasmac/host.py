@@ -117,7 +117,7 @@ class PlasmacSettings:
             "pierce-height": material.pierce_height_mm,
             "pierce-delay": self.pierce_delay_s,
             "cut-height": material.cut_height_mm,
-            "cut-volts": material.cut_voltage_v,
+            "cut-volts": material.programmed_voltage_v,
             "cut-feed-rate": material.cut_feed_mm_min,
             "puddle-jump-height": 0.0,
             "puddle-jump-delay": 0.0,
@@ -181,6 +181,7 @@ class PlasmacHost:
         self.lock_s: dict[str, float] = {}
         self.thc_moved_mm = 0.0  # THC's own Z travel, summed (for tests)
         self.void = VoidLockTally()
+        self.target_errors_v: list[float] = []  # target-volts less the true cut-height voltage
         p = component.pin
         self._in = {
             name: p(name)._cell
@@ -347,6 +348,10 @@ class PlasmacHost:
             self.paused = False
             self.run_until(lambda: not self._out["feed-hold"].value, 1.0)
             return f"paused: {self.pauses[-1]}"
+        target_v = float(self._out["target-volts"].value)
+        if target_v > 0.0:  # the cut's target: its auto volts, or the material's cut volts
+            cut_height = self.plant.scenario.material.cut_height_mm
+            self.target_errors_v.append(target_v - self.plant.arc.voltage_at_height_v(cut_height))
         self.cutting_start = False  # M5
         self.programmed_feed_mm_min = None
         ended = self.run_until(
@@ -397,6 +402,7 @@ def _run(host: PlasmacHost, plans: Sequence[CutPlan], slow_percent: float) -> Co
     result.phase_err = host.phase_err
     result.pauses = host.pauses
     result.void = host.void
+    result.target_errors_v = host.target_errors_v
     if not math.isfinite(host.t_s):
         raise RuntimeError("time ran away")
     return result

@@ -1,0 +1,141 @@
+"""Auto voltage's guards against the start transient and a flat plate's noise (issue 35):
+the transient measured over the pierce, the wait for it, the fit through it."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+
+from dthc_bridge.controller.auto_voltage import AutoVoltage, FitLimits, line_fit
+from dthc_bridge.controller.sequence import SequenceConfig
+from dthc_bridge.controller.start_transient import StartTransient
+from tests.controller.test_sequence import ready
+
+LIMITS = FitLimits(
+    max_plate_slope_v_per_mm=0.02 * 7.5,
+    min_span_mm=1.0,
+    max_residual_v=1.0,
+    max_slope_change_v_per_mm=0.05,
+    min_slope_t=2.0,
+    min_slope_v_per_mm=0.01,
+)
+OVERSHOOT_V = 20.0
+TAU_S = 0.8 / 3.0  # noisy_hf_start: 5 % left at 0.8 s
+
+
+def _arc_v(t: float, level_v: float) -> float:
+    return level_v + OVERSHOOT_V * math.exp(-t / TAU_S)
+
+
+def _pierce(rng: random.Random, *, spikes_per_s: float) -> StartTransient:
+    """0.3 s of pierce at 1 kHz in 5-sample batches: the decay, 0.5 V noise and a
+    high-frequency start's spikes of 20-100 V lasting one or two samples."""
+    transient = StartTransient()
+    spike_left = 0
+    for batch in range(60):
+        volts = []
+        for i in range(5):
+            t = (batch * 5 + i) * 0.001
+            v = _arc_v(t, 160.0) + rng.gauss(0.0, 0.5)
+            if spike_left == 0 and rng.random() < spikes_per_s * 0.001:
+                spike_left = rng.choice((1, 2))
+            if spike_left:
+                spike_left -= 1
+                v += rng.choice((-1.0, 1.0)) * rng.uniform(20.0, 100.0)
+            volts.append(v)
+        transient.add(batch * 0.005 + 0.004, volts)
+    transient.fit()
+    return transient
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_the_pierce_measures_the_decay_through_a_high_frequency_start(seed: int) -> None:
+    """200 spikes a second: the decay's size and time constant within a quarter, so that
+    what is left at 0.75 s is known within 0.75 V (without the median of three batches and
+    the second fit without the batches far off the first, spike batches take the decay's
+    place: no model, or tau off by half)."""
+    transient = _pierce(random.Random(seed), spikes_per_s=200.0)
+    assert transient.tau_s == pytest.approx(TAU_S, rel=0.25)
+    assert transient.overshoot_v == pytest.approx(OVERSHOOT_V, rel=0.25)
+    true_left = OVERSHOOT_V * math.exp(-0.75 / TAU_S)
+    assert transient.remnant_v(0.75) == pytest.approx(true_left, abs=0.75)
+
+
+def test_a_steady_pierce_has_no_transient_to_wait_for() -> None:
+    """No decay in the pierce's voltages: no model, nothing left at any time."""
+    transient = StartTransient()
+    rng = random.Random(4)
+    for batch in range(60):
+        transient.add(batch * 0.005, [160.0 + rng.gauss(0.0, 0.5) for _ in range(5)])
+    transient.fit()
+    assert transient.overshoot_v == 0.0
+    assert transient.remnant_v(0.1) == 0.0
+
+
+def test_a_short_pierce_gives_no_model() -> None:
+    transient = StartTransient()
+    for batch in range(5):
+        transient.add(batch * 0.005, [_arc_v(batch * 0.005, 160.0)] * 5)
+    transient.fit()
+    assert transient.remnant_v(0.5) == 0.0
+
+
+def test_a_flat_plates_slope_in_the_noise_gives_the_mean() -> None:
+    """A slope of 0.005 V/mm over 30 mm is noise on a flat plate: the mean of the window,
+    not the line's value 15 mm before it (0.1 V further off)."""
+    distances = [15.0 + 0.5 * i for i in range(60)]
+    volts = [125.0 + 0.005 * (d - 30.0) + 0.01 * (-1) ** i for i, d in enumerate(distances)]
+    fit = line_fit(distances, volts, LIMITS)
+    assert fit is not None
+    assert fit[1] == 0.0
+    assert fit[0] == pytest.approx(sum(volts) / len(volts))
+    steep = [125.0 + 0.05 * (d - 30.0) for d in distances]
+    sloped = line_fit(distances, steep, LIMITS)
+    assert sloped is not None
+    assert sloped[0] == pytest.approx(125.0 - 1.5)
+
+
+def test_the_fit_through_the_transient_removes_its_tail() -> None:
+    """A flat plate, the mean taken while 1.5 V of overshoot is left: the pierce's and the
+    cut's voltages fitted together give the level without it."""
+    rng = random.Random(5)
+    transient = _pierce(rng, spikes_per_s=0.0)
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=LIMITS, transient=transient)
+    t = 0.7
+    d = 30.0
+    estimate = None
+    while estimate is None:
+        estimate = auto.sample(t, _arc_v(t, 128.0) + rng.gauss(0.0, 0.1), d, void=False)
+        t, d = t + 0.005, d + 0.2
+    refined = None
+    while auto.wants_refining:
+        refined = auto.refine(t, _arc_v(t, 128.0) + rng.gauss(0.0, 0.1), d, void=False)
+        t, d = t + 0.005, d + 0.2
+    assert refined is not None
+    assert refined == pytest.approx(128.0, abs=0.3)
+
+
+@pytest.mark.parametrize("seed", [1, 4, 5])
+def test_auto_voltage_on_a_noisy_cutter_with_a_slow_transient(seed: int) -> None:
+    """noisy_hf_start (20 V of overshoot, 5 % left at 0.8 s; 2 V noise bursts; spikes):
+    the target within half a volt of the arc's true voltage at cut height, where it was
+    1.4-2.2 V over it (the transient's tail in the mean). Seed 5 needs a noise burst's
+    voltages left out of the window (else -0.81 V)."""
+    loop = ready("noisy_hf_start", seed=seed, cut_voltage_v=None)
+    assert loop.m3().ok
+    assert loop.move("G1 X350 Y50 F2550", max_s=20)
+    cut = loop.sequence.cut
+    assert cut is not None
+    assert cut.cut_height_v is not None
+    truth = loop.plant.arc.voltage_at_height_v(1.5)
+    assert cut.cut_height_v == pytest.approx(truth, abs=0.5)
+    assert cut.transient.overshoot_v > 10.0
+
+
+def test_the_wait_for_the_transient_is_bounded() -> None:
+    """The configuration's bound on that wait, and its threshold, have owner defaults."""
+    config = SequenceConfig()
+    assert config.auto_voltage_max_transient_v == 0.3
+    assert config.auto_voltage_max_wait_s == 2.0
