@@ -35,10 +35,11 @@ SAMPLE_PERIOD_US = 1000
 BAUD = 1_000_000  # the firmware's UART (firmware/avr/pins.h)
 # The plate under the torch rises and falls 0.3 mm every 4 s while the arc burns; the
 # MASSO sample pierces 10 mm high (G200 P10), so the pilot reaches 12 mm (as the mock's
-# masso_warped scenario).
+# masso_warped scenario), and its arc gives the program's 116 V (G200 V116) at its 3.5 mm
+# cut height (C3.5), as that scenario's does: the THC holds the height, not 2 mm lower.
 BOARD_MODEL = {
     "plate-mm": 20.0, "warp-mm": 0.3, "warp-period-s": 4.0, "transfer-max-mm": 12.0,
-    "lose-above-mm": 12.0,
+    "lose-above-mm": 12.0, "cut-height-mm": 3.5,
 }  # fmt: skip
 # The states in which the daemon may have the torch lit (from TORCH on to the end of a cut).
 LIT_STATES = frozenset(
