@@ -83,8 +83,11 @@ class Port:
             await asyncio.sleep(0)
 
 
-async def _with_port(body: Callable[[Port], Any]) -> Port:
+async def _with_port(body: Callable[[Port], Any], grbl: Grbl | None = None) -> Port:
     port = Port()
+    if grbl is not None:  # another table's grbl behind the port
+        port.grbl = grbl
+        port.session = PortSession(Sender(port.daemon, grbl), grbl, port.out.extend)
     runner = asyncio.ensure_future(port.session.run())
     try:
         await body(port)
@@ -224,15 +227,7 @@ async def test_a_sender_is_told_the_ports_receive_buffer_not_grbls() -> None:
         port.session.received(b"?")
         await port.settle()
 
-    port = Port()
-    port.grbl = GrblHal()
-    port.session = PortSession(Sender(port.daemon, port.grbl), port.grbl, port.out.extend)
-    runner = asyncio.ensure_future(port.session.run())
-    try:
-        await body(port)
-    finally:
-        runner.cancel()
-        await asyncio.gather(runner, return_exceptions=True)
+    port = await _with_port(body, GrblHal())
     said = port.said
     assert said[:3] == ["[VER:1.1f.20230101:]", f"[OPT:VNMZL,35,{RX_BUFFER_BYTES}]", "ok"]
     reports = [line for line in said if line.startswith("<")]
