@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 import re
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from dthc_bridge.controller.words import GcodeSyntaxError, tokenize
+from dthc_bridge.controller.words import GcodeSyntaxError, Word, tokenize
 
 __all__ = [
     "ALARMS",
@@ -92,10 +93,19 @@ class LineRefused(ValueError):
 
 # Words grbl must never see in our system: Z is the DTHC board's, the torch the daemon's.
 _SPINDLE_M = {3.0, 4.0, 5.0}
+# LinuxCNC modal words that PlasmaC and SheetCam posts write in their preamble and that grbl
+# 1.1 refuses (error:20) though they change nothing a plasma table's XY does: G64 (path
+# blending with a tolerance P, Q: grbl always blends), G97 (spindle RPM mode: no spindle),
+# M52 (adaptive feed, with its P: grbl has none; a pause here is the daemon's and grbl's hold),
+# G43 H (a tool length offset: Z is the DTHC board's, grbl's Z never moves).
+_LINUXCNC_ONLY_G = {43.0, 64.0, 97.0}
+_LINUXCNC_ONLY_M = {52.0}
+_P_USERS_G = {4.0, 10.0, 38.2, 38.3, 38.4, 38.5}  # a P on their line is theirs, not G64's
 
 
 def for_grbl(line: str) -> str:
-    """The line as sent: comments and spaces dropped (they cost receive buffer), upper case.
+    """The line as sent: comments and spaces dropped (they cost receive buffer), upper case;
+    the LinuxCNC words grbl refuses that change nothing of XY (G64, G97, G43 H, M52) dropped.
 
     Raises :class:`LineRefused` for a Z word or a spindle/torch word (M3/M4/M5, S): the plan
     never routes them here, so one arriving is a bug worth stopping for."""
@@ -104,14 +114,36 @@ def for_grbl(line: str) -> str:
         spindle = [w for w in words if w.letter == "M" and w.value in _SPINDLE_M]
     except GcodeSyntaxError as exc:
         raise LineRefused(f"{line!r}: {exc}") from None
-    for word in words:
+    kept = _without_linuxcnc_only(words)
+    if len(kept) < len(words) and all(w.letter == "N" for w in kept):
+        return ""  # nothing but its line number left: nothing for grbl
+    for word in kept:
         if word.letter == "Z":
             raise LineRefused(f"{line!r}: Z words go to the DTHC board, never to grbl")
         if word.letter == "S" or word in spindle:
             raise LineRefused(
                 f"{line!r}: {word.letter}{word.number} is the torch's (the daemon's), never grbl's"
             )
-    return "".join(word.letter + word.number for word in words)
+    return "".join(word.letter + word.number for word in kept)
+
+
+def _without_linuxcnc_only(words: Sequence[Word]) -> Sequence[Word]:
+    """``words`` less G64 (with its P and Q), G97, G43 (its H) and M52 (its P); unchanged
+    without them."""
+    gs = {w.value for w in words if w.letter == "G"}
+    ms = {w.value for w in words if w.letter == "M"}
+    if not (gs & _LINUXCNC_ONLY_G or ms & _LINUXCNC_ONLY_M):
+        return words
+    blend = 64.0 in gs
+    p_theirs = (blend or 52.0 in ms) and not gs & _P_USERS_G
+    return [
+        w for w in words
+        if not (w.letter == "G" and w.value in _LINUXCNC_ONLY_G)
+        and not (w.letter == "M" and w.value in _LINUXCNC_ONLY_M)
+        and not (blend and w.letter == "Q")
+        and not (43.0 in gs and w.letter == "H")
+        and not (p_theirs and w.letter == "P")
+    ]  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)

@@ -130,3 +130,15 @@ def test_the_anti_dive_sees_zero_when_held_and_the_lower_of_measured_and_fs() ->
 def test_error_codes_read_as_words() -> None:
     assert "feed" in error_text(22)
     assert error_text(999) == "an error the firmware did not document"
+
+
+def test_linuxcnc_only_modal_words_posts_write_are_dropped_not_refused_by_grbl() -> None:
+    """A PlasmaC/SheetCam preamble's G97, G64 P Q, M52 P1: grbl 1.1 answers error:20,
+    and neither changes what XY does; a P that belongs to another G on the line stays."""
+    assert for_grbl("N10 G20 G40 G90 G94 G97 G92.1") == "N10G20G40G90G94G92.1"
+    assert for_grbl("N60 G64 P0.01 Q0.001") == ""  # nothing left for grbl
+    assert for_grbl("G64") == ""
+    assert for_grbl("G4 G64 P0.5") == "G4P0.5"
+    assert for_grbl("N20 M52 P1") == ""  # adaptive feed: grbl has none
+    assert for_grbl("G43 H0") == ""  # a tool length offset: Z is the board's
+    assert for_grbl("G90 G1 X5 F100") == "G90G1X5F100"
