@@ -163,8 +163,8 @@ def line_fit(
     if max(distances_mm) - min(distances_mm) < limits.min_span_mm or sdd <= 0.0:
         return None
     pairs = list(zip(distances_mm, volts, strict=True))
-    b = sum((d - mean_d) * (v - mean_v) for d, v in pairs) / sdd
-    if abs(b) > limits.max_plate_slope_v_per_mm:
+    b = _slope(distances_mm, volts)
+    if b is None or abs(b) > limits.max_plate_slope_v_per_mm:
         return None
     half = n // 2
     b1 = _slope(distances_mm[:half], volts[:half])
