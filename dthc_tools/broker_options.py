@@ -13,15 +13,18 @@ so the sender, the panel and the daemon log in and verify the broker the same wa
 from __future__ import annotations
 
 import argparse
+import asyncio
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Coroutine, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 from urllib.parse import urlsplit
 
+import aiomqtt
 from pydantic import SecretStr, ValidationError
 
-from dthc_bridge.mqtt.broker import BrokerSettings, MqttTls
+from dthc_bridge.mqtt.broker import BrokerSettings, MqttTls, describe_broker_error
 
 __all__ = [
     "PASSWORD_ENV",
@@ -30,6 +33,7 @@ __all__ = [
     "broker_from_args",
     "login_file",
     "parse_with_broker",
+    "run_with_broker",
 ]
 
 PASSWORD_ENV = "DTHC_BROKER_PASSWORD"  # noqa: S105 - the variable's name, not a password
@@ -151,3 +155,22 @@ def broker_from_args(
     except ValidationError as exc:
         problems = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
         raise BrokerOptionError(f"--broker {url!r}: {problems}") from None
+
+
+def run_with_broker(
+    prog: str,
+    args: argparse.Namespace,
+    work: Coroutine[Any, Any, int],
+    *failures: type[Exception],
+) -> int:
+    """``work`` run to its end, its exit status; the broker failing (named as the broker
+    settings would have it), or one of ``failures`` (the tool's own: a file, a port, its
+    grbl), said on one line naming ``prog``: 2."""
+    try:
+        return asyncio.run(work)
+    except aiomqtt.MqttError as exc:
+        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
+        return 2
+    except failures as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2

@@ -11,18 +11,14 @@ at a time)."""
 from __future__ import annotations
 
 import argparse
-import asyncio
 import grp
 import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import aiomqtt
-
-from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_bridge.program.options import add_dialect_options
-from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
+from dthc_tools.broker_options import add_broker_arguments, parse_with_broker, run_with_broker
 from mock_device.links import BoardLink, PtyLink, TcpLink
 
 from ..sender import DaemonClient, Sender
@@ -132,12 +128,6 @@ def share_pty(link: PtyLink, group: str) -> None:
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge grbl-port") -> int:
     args = parse_with_broker(build_parser(prog), argv)
     try:
-        return asyncio.run(_serve(args))
-    except aiomqtt.MqttError as exc:
-        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
-        return 2
-    except (BackendError, OSError) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 2
+        return run_with_broker(prog, args, _serve(args), BackendError, OSError)
     except KeyboardInterrupt:
         return 0

@@ -11,11 +11,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import aiomqtt
 from aiohttp import web
 
-from dthc_bridge.mqtt.broker import describe_broker_error
-from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
+from dthc_tools.broker_options import add_broker_arguments, parse_with_broker, run_with_broker
 from dthc_tools.sender.daemon_client import DaemonClient
 
 from .connections import start_guarded_site
@@ -154,11 +152,5 @@ def _url_host(host: str) -> str:
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge panel") -> int:
     args = parse_with_broker(build_parser(prog), argv)
-    try:
-        return asyncio.run(serve(args))
-    except aiomqtt.MqttError as exc:
-        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # the port is taken, the token or password file is missing
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 2
+    # OSError: the port is taken, the token or password file is missing.
+    return run_with_broker(prog, args, serve(args), OSError)

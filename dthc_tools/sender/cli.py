@@ -10,12 +10,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import aiomqtt
-
 from dthc_bridge.logs import configure_logging
-from dthc_bridge.mqtt.broker import describe_broker_error
 from dthc_bridge.program.options import add_dialect_options
-from dthc_tools.broker_options import add_broker_arguments, parse_with_broker
+from dthc_tools.broker_options import add_broker_arguments, parse_with_broker, run_with_broker
 
 from .backend import BackendError, MotionBackend, SimGantryBackend
 from .console import OperatorConsole
@@ -138,14 +135,5 @@ def _interactive() -> bool:
 
 def main(argv: Sequence[str] | None = None, *, prog: str = "dthc-bridge send") -> int:
     args = parse_with_broker(build_parser(prog), argv)
-    try:
-        return asyncio.run(_send(args))
-    except aiomqtt.MqttError as exc:
-        print(f"{prog}: {describe_broker_error(exc, args.broker_settings)}", file=sys.stderr)
-        return 2
-    except BackendError as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # the program file, a password or TLS file, the backend's port
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return 2
+    # OSError: the program file, a password or TLS file, the backend's port.
+    return run_with_broker(prog, args, _send(args), BackendError, OSError)
