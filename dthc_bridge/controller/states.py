@@ -433,9 +433,14 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
             velocity = _updown_velocity(seq)
         else:
             velocity = thc.update(volts, period_s, now, dt).velocity_mm_s
-        if _window_fault(seq, velocity):
-            return
-        velocity = _window_limit(seq, velocity, dt)
+        offset = _window_offset_mm(seq)
+        if offset is not None:  # the height window: a breach ends the cut, else a limit
+            window = seq.height_window()
+            reason = window.breach(offset, velocity)
+            if reason is not None:
+                seq._fault(reason)
+                return
+            velocity = window.limit(velocity, offset, dt, thc.config.max_accel_mm_s2)
     z_next = seq._z_mm + velocity * dt
     if velocity < 0 and z_next <= cfg.z_min_mm:
         seq._fault("Z min limit reached during THC")
@@ -459,23 +464,6 @@ def _window_offset_mm(seq: CutSequence) -> float | None:
     # The window is around the cut height in force: the operator's offset and height
     # override move it with the target.
     return seq.height_window().offset_mm(voltage, cut.cut_height_v + seq._override_v())
-
-
-def _window_fault(seq: CutSequence, command_mm_s: float) -> bool:
-    offset = _window_offset_mm(seq)
-    if offset is None:
-        return False
-    reason = seq.height_window().breach(offset, command_mm_s)
-    if reason is not None:
-        seq._fault(reason)
-    return reason is not None
-
-
-def _window_limit(seq: CutSequence, velocity_mm_s: float, dt: float) -> float:
-    offset = _window_offset_mm(seq)
-    if offset is None:
-        return velocity_mm_s
-    return seq.height_window().limit(velocity_mm_s, offset, dt, seq.thc.config.max_accel_mm_s2)
 
 
 def _updown_velocity(seq: CutSequence) -> float:
