@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import grp
+import ipaddress
 import os
 import sys
 from collections.abc import Sequence
@@ -64,8 +65,24 @@ def _link(listen: str, session: PortSession) -> BoardLink:
         host, _, port = listen.removeprefix("tcp://").rpartition(":")
         if not host or not port.isdigit():
             raise SystemExit(f"--listen {listen!r}: expected tcp://HOST:PORT")
+        if not _loopback(host):
+            # A grbl's TCP port has no login (senders speak raw grbl to it): whoever reaches
+            # it can start a cut. The pty (the default) is the serial ports' group's only.
+            print(
+                f"--listen {listen}: anyone who can reach this address can start a cut "
+                "through the port (grbl's TCP has no login); keep it on the shop's own "
+                "network, or firewalled to the sender's PC",
+                file=sys.stderr,
+            )
         return TcpLink(host, int(port), session.received)
     return PtyLink(Path(listen), session.received)
+
+
+def _loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return host == "localhost"
 
 
 async def _serve(args: argparse.Namespace) -> int:

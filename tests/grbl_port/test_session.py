@@ -8,6 +8,9 @@ import asyncio
 from collections.abc import Callable
 from typing import Any
 
+import pytest
+
+from dthc_tools.grbl_port.cli import _link
 from dthc_tools.grbl_port.session import BANNER, RX_BUFFER_BYTES, PortSession
 from dthc_tools.sender import Sender
 
@@ -236,3 +239,16 @@ async def test_a_sender_is_told_the_ports_receive_buffer_not_grbls() -> None:
         f"<Idle|MPos:0.000,0.000,0.000|Bf:35,{RX_BUFFER_BYTES - 16}|FS:0,0>",
         f"<Idle|MPos:0.000,0.000,0.000|Bf:35,{RX_BUFFER_BYTES}|FS:0,0>",
     ]
+
+
+def test_a_tcp_listener_beyond_loopback_is_said_to_be_open_to_its_network(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Invariant 8: a grbl's TCP port has no login, so listening beyond loopback is said
+    out loud; loopback says nothing (the pty, the default, is the serial ports' group's)."""
+    session = Port().session
+    _link("tcp://127.0.0.1:2323", session)
+    _link("tcp://localhost:2323", session)
+    assert capsys.readouterr().err == ""
+    _link("tcp://0.0.0.0:2323", session)
+    assert "anyone who can reach this address can start a cut" in capsys.readouterr().err
