@@ -156,7 +156,7 @@ def messages_py() -> str:
     out.append(_py_union("BoardMessage", board))
     out.append("Message = HostMessage | BoardMessage\n")
     out.append("# What the board reports unasked, each with the board time it happened at.\n")
-    out.append("Report = Event | Fault | MotionDone | ProbeResult\n\n")
+    out.append("Report = Event | Fault | MotionDone | ProbeResult | HomeResult\n\n")
     out.append(_py_tuple("HOST_MESSAGES", "HostMessage", host))
     out.append(_py_tuple("BOARD_MESSAGES", "BoardMessage", board))
     out.append(

@@ -32,6 +32,7 @@ __all__ = [
     "ZVEL_EXPIRY_MAX_MS",
     "Capability",
     "FaultCode",
+    "HomeOutcome",
     "FilterKind",
     "InputBit",
     "InputMask",
@@ -46,7 +47,7 @@ __all__ = [
 ]
 
 PROTOCOL_MAJOR: Final = 1
-PROTOCOL_MINOR: Final = 2  # 1.1: the idle lease lapse (§4); 1.2: Z_PROBE_AWAY (§6.1)
+PROTOCOL_MINOR: Final = 3  # 1.1: the idle lease lapse (§4); 1.2: Z_PROBE_AWAY; 1.3: Z_HOME (§6.1)
 
 DELIMITER: Final = 0x00
 # Decoded frame = type(1) seq(1) payload(0..MAX_PAYLOAD) crc(2).
@@ -98,6 +99,7 @@ class MsgType(IntEnum):
     CLOCK_QUERY = 0x0D
     FAULT_RESET = 0x0E
     Z_PROBE_AWAY = 0x0F  # since 1.2
+    Z_HOME = 0x10  # since 1.3
 
     ACK = 0x80
     NAK = 0x81
@@ -109,6 +111,7 @@ class MsgType(IntEnum):
     PROBE_RESULT = 0x87
     STATUS = 0x88
     CLOCK = 0x89
+    HOME_RESULT = 0x8A  # since 1.3
 
 
 # --- end of generated MsgType ---
@@ -152,6 +155,7 @@ class StatusBit(IntFlag):
     Z_BUSY = 1 << 3
     SAMPLE_OVERFLOW = 1 << 4
     SESSION = 1 << 5
+    HOMED = 1 << 6  # Z homed since power-on (1.3): the board's Z is the machine's
 
 
 class Capability(IntFlag):
@@ -166,6 +170,7 @@ class Capability(IntFlag):
     ESTOP = 1 << 6
     Z_LIMITS = 1 << 7
     FILTERS = 1 << 8
+    HOMING = 1 << 9  # Z_HOME on a home switch at Z_LIMIT_MAX (1.3)
 
 
 class FaultCode(IntEnum):
@@ -220,6 +225,16 @@ class ProbeOutcome(IntEnum):
     NO_RELEASE = 5  # Z_PROBE_AWAY: max travel reached with a sensor still active
 
 
+class HomeOutcome(IntEnum):
+    """HOME_RESULT.result (1.3)."""
+
+    HOMED = 0
+    NOT_FOUND = 1  # the switch did not close within max travel
+    TIMEOUT = 2  # the whole cycle outlasted timeout_ms
+    ABORTED = 3  # Z_STOP, a new Z command, a fault or the lease
+    NO_RELEASE = 4  # backing off by max travel did not open the switch
+
+
 class MotionResult(IntEnum):
     REACHED = 0
     STOPPED = 1
@@ -240,3 +255,4 @@ class QueryWhat(IntEnum):
     PROBE_RESULT = 1
     HELLO_INFO = 2
     MOTION_DONE = 3
+    HOME_RESULT = 4  # 1.3

@@ -185,7 +185,7 @@ MESSAGES: tuple[MessageDecl, ...] = (
         (Field("what", "u8"),),
         doc="Ask the board to (re)send one of its reports, chosen by ``what`` (QueryWhat).",
         reply="the report asked for",
-        note="0 STATUS, 1 PROBE_RESULT, 2 HELLO_INFO, 3 MOTION_DONE",
+        note="0 STATUS, 1 PROBE_RESULT, 2 HELLO_INFO, 3 MOTION_DONE, 4 HOME_RESULT",
     ),
     MessageDecl(0x0D, "CLOCK_QUERY", "ClockQuery", HOST, reply="CLOCK"),
     MessageDecl(
@@ -207,6 +207,25 @@ MESSAGES: tuple[MessageDecl, ...] = (
         reply="ACK, later PROBE_RESULT",
         since="1.2",
         same_as="Z_PROBE",
+    ),
+    MessageDecl(
+        0x10,
+        "Z_HOME",
+        "ZHome",
+        HOST,
+        (
+            Field("seek_um_s", "u32", "µm/s", doc="up to the switch, fast"),
+            Field("locate_um_s", "u32", "µm/s", doc="the slow re-seek that sets the position"),
+            Field("backoff_um", "u32", "µm", doc="off the switch before the re-seek, and after"),
+            Field("max_travel_um", "u32", "µm", doc="the seek's longest travel"),
+            Field("home_z_um", "i32", "µm", doc="Z at the switch's trip point"),
+            Field("timeout_ms", "u16", "ms"),
+        ),
+        doc="Home Z on its home switch (Z_LIMIT_MAX, up, away from the plate): seek, back\n"
+        "off, re-seek slowly, back off (protocol 1.3); HOME_RESULT follows.",
+        reply="ACK, later HOME_RESULT",
+        note="home_z_um ≥ z_max_um; home_z_um - backoff_um within the soft limits",
+        since="1.3",
     ),
     # --- board to host (PROTOCOL.md 6.2) --------------------------------------------------
     MessageDecl(0x80, "ACK", "Ack", BOARD, (Field("boot_id", "u32"),)),
@@ -356,5 +375,24 @@ def t_last_us(self) -> int:
         "Clock",
         BOARD,
         (Field("t_us", "u64", "µs", doc="64-bit board clock when the reply was built"),),
+    ),
+    MessageDecl(
+        0x8A,
+        "HOME_RESULT",
+        "HomeResult",
+        BOARD,
+        (
+            Field("result", "u8"),
+            Field("z_um", "i32", "µm", doc="where Z came to rest"),
+            Field(
+                "shift_um",
+                "i32",
+                "µm",
+                doc="how far homing moved the board's Z (0: its count was right)",
+            ),
+            Field("t_us", "u32", "µs"),
+        ),
+        seq_doc="the Z_HOME it ends",
+        since="1.3",
     ),
 )

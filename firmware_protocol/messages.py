@@ -31,6 +31,7 @@ __all__ = [
     "Heartbeat",
     "Hello",
     "HelloInfo",
+    "HomeResult",
     "HostMessage",
     "Message",
     "MotionDone",
@@ -44,6 +45,7 @@ __all__ = [
     "SetLease",
     "Status",
     "Torch",
+    "ZHome",
     "ZMove",
     "ZProbe",
     "ZProbeAway",
@@ -155,6 +157,19 @@ class ZProbeAway(NamedTuple):
     feed_um_s: int
     max_travel_um: int
     sensors: int  # input bit mask
+
+
+class ZHome(NamedTuple):
+    """Home Z on its home switch (Z_LIMIT_MAX, up, away from the plate): seek, back
+    off, re-seek slowly, back off (protocol 1.3); HOME_RESULT follows."""
+
+    seq: int
+    seek_um_s: int  # up to the switch, fast
+    locate_um_s: int  # the slow re-seek that sets the position
+    backoff_um: int  # off the switch before the re-seek, and after
+    max_travel_um: int  # the seek's longest travel
+    home_z_um: int  # Z at the switch's trip point
+    timeout_ms: int
 
 
 # --- board to host -------------------------------------------------------------------------
@@ -278,6 +293,14 @@ class Clock(NamedTuple):
     t_us: int  # 64-bit board clock when the reply was built
 
 
+class HomeResult(NamedTuple):
+    seq: int  # the Z_HOME it ends
+    result: int
+    z_um: int  # where Z came to rest
+    shift_um: int  # how far homing moved the board's Z (0: its count was right)
+    t_us: int
+
+
 HostMessage = (
     Hello
     | Heartbeat
@@ -294,13 +317,24 @@ HostMessage = (
     | ClockQuery
     | FaultReset
     | ZProbeAway
+    | ZHome
 )
 BoardMessage = (
-    Ack | Nak | HelloInfo | Samples | Event | Fault | MotionDone | ProbeResult | Status | Clock
+    Ack
+    | Nak
+    | HelloInfo
+    | Samples
+    | Event
+    | Fault
+    | MotionDone
+    | ProbeResult
+    | Status
+    | Clock
+    | HomeResult
 )
 Message = HostMessage | BoardMessage
 # What the board reports unasked, each with the board time it happened at.
-Report = Event | Fault | MotionDone | ProbeResult
+Report = Event | Fault | MotionDone | ProbeResult | HomeResult
 
 HOST_MESSAGES: tuple[type[HostMessage], ...] = (
     Hello,
@@ -318,6 +352,7 @@ HOST_MESSAGES: tuple[type[HostMessage], ...] = (
     ClockQuery,
     FaultReset,
     ZProbeAway,
+    ZHome,
 )
 BOARD_MESSAGES: tuple[type[BoardMessage], ...] = (
     Ack,
@@ -330,6 +365,7 @@ BOARD_MESSAGES: tuple[type[BoardMessage], ...] = (
     ProbeResult,
     Status,
     Clock,
+    HomeResult,
 )
 
 # Payload layouts after the two header bytes, little-endian ``struct`` codes in the
@@ -351,6 +387,7 @@ LAYOUTS: Final[dict[type[Any], tuple[MsgType, str]]] = {
     ClockQuery: (MsgType.CLOCK_QUERY, ""),
     FaultReset: (MsgType.FAULT_RESET, "H"),
     ZProbeAway: (MsgType.Z_PROBE_AWAY, "IIH"),
+    ZHome: (MsgType.Z_HOME, "IIIIiH"),
     Ack: (MsgType.ACK, "I"),
     Nak: (MsgType.NAK, "IBB"),
     HelloInfo: (MsgType.HELLO_INFO, "BBBBBBI16sHBIiiHH"),
@@ -361,4 +398,5 @@ LAYOUTS: Final[dict[type[Any], tuple[MsgType, str]]] = {
     ProbeResult: (MsgType.PROBE_RESULT, "BHiiI"),
     Status: (MsgType.STATUS, "IIHHBHIHHiHHHH"),
     Clock: (MsgType.CLOCK, "Q"),
+    HomeResult: (MsgType.HOME_RESULT, "BiiI"),
 }

@@ -26,6 +26,7 @@ from .constants import (
     Capability,
     FaultCode,
     FilterKind,
+    HomeOutcome,
     InputBit,
     InputMask,
     MotionResult,
@@ -71,6 +72,8 @@ def message_cases() -> list[tuple[str, m.Message]]:
         ("fault_reset_all", m.FaultReset(17, 0xFFFF)),
         # 1.2: lift off the float switch, 0.5 mm at most, at 20 mm/min (G38.4 Z0.5 F20).
         ("z_probe_away_float", m.ZProbeAway(18, 333, 500, InputMask.FLOAT)),
+        # 1.3: home Z at 20 mm/s, re-seek at 2 mm/s, back off 3 mm, switch at Z 102 mm.
+        ("z_home", m.ZHome(19, 20_000, 2_000, 3_000, 150_000, 102_000, 15_000)),
         ("ack", m.Ack(4, _BOOT_ID)),
         ("nak_fault_latched", m.Nak(4, _BOOT_ID, NakCode.FAULT_LATCHED, FaultCode.LEASE_EXPIRED)),
         ("nak_out_of_range", m.Nak(3, _BOOT_ID, NakCode.OUT_OF_RANGE, 0)),
@@ -88,7 +91,7 @@ def message_cases() -> list[tuple[str, m.Message]]:
                 "DTHC-000042",
                 1000,
                 5,
-                int(Capability(0x1FF)),
+                int(Capability(0x3FF)),
                 0,
                 100_000,
                 256,
@@ -195,6 +198,7 @@ def message_cases() -> list[tuple[str, m.Message]]:
             m.Status(14, _BOOT_ID, 6_000_000, 0, 1, 0x21, 250, 9, 42, 1234, 21_500, 450, 1, 2, 3),
         ),
         ("clock", m.Clock(16, 0x0123456789ABCDEF)),
+        ("home_result_homed", m.HomeResult(19, HomeOutcome.HOMED, 99_000, -21_337, 7_000_000)),
     ]
 
 

@@ -35,6 +35,7 @@ typedef enum {
     DTHC_MSG_CLOCK_QUERY = 0x0D,
     DTHC_MSG_FAULT_RESET = 0x0E,
     DTHC_MSG_Z_PROBE_AWAY = 0x0F, /* since 1.2 */
+    DTHC_MSG_Z_HOME = 0x10, /* since 1.3 */
 
     DTHC_MSG_ACK = 0x80,
     DTHC_MSG_NAK = 0x81,
@@ -45,7 +46,8 @@ typedef enum {
     DTHC_MSG_MOTION_DONE = 0x86,
     DTHC_MSG_PROBE_RESULT = 0x87,
     DTHC_MSG_STATUS = 0x88,
-    DTHC_MSG_CLOCK = 0x89
+    DTHC_MSG_CLOCK = 0x89,
+    DTHC_MSG_HOME_RESULT = 0x8A /* since 1.3 */
 } dthc_msg_type_t;
 
 /* HELLO_INFO.serial: ASCII, padded with 0x00 to this many bytes on the wire. */
@@ -366,6 +368,55 @@ static inline void dthc_unpack_fault_reset(const uint8_t *p, dthc_fault_reset_t 
  * (LinuxCNC's G38.4/G38.5 on Z; protocol 1.2); PROBE_RESULT follows.
  * Payload as Z_PROBE: dthc_z_probe_t and its accessors. */
 #define DTHC_Z_PROBE_AWAY_SIZE 10
+
+/* 0x10 Z_HOME (host to board, 22 bytes, since 1.3):
+ * Home Z on its home switch (Z_LIMIT_MAX, up, away from the plate): seek, back off, re-seek
+ * slowly, back off (protocol 1.3); HOME_RESULT follows. */
+#define DTHC_Z_HOME_SIZE 22
+typedef struct {
+    uint32_t seek_um_s; /* up to the switch, fast [um/s] */
+    uint32_t locate_um_s; /* the slow re-seek that sets the position [um/s] */
+    uint32_t backoff_um; /* off the switch before the re-seek, and after [um] */
+    uint32_t max_travel_um; /* the seek's longest travel [um] */
+    int32_t home_z_um; /* Z at the switch's trip point [um] */
+    uint16_t timeout_ms; /* [ms] */
+} dthc_z_home_t;
+static inline void dthc_z_home_put_seek_um_s(uint8_t *p, uint32_t v) { dthc_put_u32(p, v); }
+static inline uint32_t dthc_z_home_get_seek_um_s(const uint8_t *p) { return dthc_get_u32(p); }
+static inline void dthc_z_home_put_locate_um_s(uint8_t *p, uint32_t v) { dthc_put_u32(p + 4, v); }
+static inline uint32_t dthc_z_home_get_locate_um_s(const uint8_t *p) { return dthc_get_u32(p + 4); }
+static inline void dthc_z_home_put_backoff_um(uint8_t *p, uint32_t v) { dthc_put_u32(p + 8, v); }
+static inline uint32_t dthc_z_home_get_backoff_um(const uint8_t *p) { return dthc_get_u32(p + 8); }
+static inline void dthc_z_home_put_max_travel_um(uint8_t *p, uint32_t v)
+{
+    dthc_put_u32(p + 12, v);
+}
+static inline uint32_t dthc_z_home_get_max_travel_um(const uint8_t *p)
+{
+    return dthc_get_u32(p + 12);
+}
+static inline void dthc_z_home_put_home_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 16, v); }
+static inline int32_t dthc_z_home_get_home_z_um(const uint8_t *p) { return dthc_get_i32(p + 16); }
+static inline void dthc_z_home_put_timeout_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 20, v); }
+static inline uint16_t dthc_z_home_get_timeout_ms(const uint8_t *p) { return dthc_get_u16(p + 20); }
+static inline void dthc_pack_z_home(uint8_t *p, const dthc_z_home_t *m)
+{
+    dthc_z_home_put_seek_um_s(p, m->seek_um_s);
+    dthc_z_home_put_locate_um_s(p, m->locate_um_s);
+    dthc_z_home_put_backoff_um(p, m->backoff_um);
+    dthc_z_home_put_max_travel_um(p, m->max_travel_um);
+    dthc_z_home_put_home_z_um(p, m->home_z_um);
+    dthc_z_home_put_timeout_ms(p, m->timeout_ms);
+}
+static inline void dthc_unpack_z_home(const uint8_t *p, dthc_z_home_t *m)
+{
+    m->seek_um_s = dthc_z_home_get_seek_um_s(p);
+    m->locate_um_s = dthc_z_home_get_locate_um_s(p);
+    m->backoff_um = dthc_z_home_get_backoff_um(p);
+    m->max_travel_um = dthc_z_home_get_max_travel_um(p);
+    m->home_z_um = dthc_z_home_get_home_z_um(p);
+    m->timeout_ms = dthc_z_home_get_timeout_ms(p);
+}
 
 /* 0x80 ACK (board to host, 4 bytes) */
 #define DTHC_ACK_SIZE 4
@@ -900,6 +951,40 @@ static inline void dthc_unpack_clock(const uint8_t *p, dthc_clock_t *m)
     m->t_us = dthc_clock_get_t_us(p);
 }
 
+/* 0x8A HOME_RESULT (board to host, 13 bytes, since 1.3) */
+#define DTHC_HOME_RESULT_SIZE 13
+typedef struct {
+    uint8_t result;
+    int32_t z_um; /* where Z came to rest [um] */
+    int32_t shift_um; /* how far homing moved the board's Z (0: its count was right) [um] */
+    uint32_t t_us; /* [us] */
+} dthc_home_result_t;
+static inline void dthc_home_result_put_result(uint8_t *p, uint8_t v) { p[0] = v; }
+static inline uint8_t dthc_home_result_get_result(const uint8_t *p) { return p[0]; }
+static inline void dthc_home_result_put_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 1, v); }
+static inline int32_t dthc_home_result_get_z_um(const uint8_t *p) { return dthc_get_i32(p + 1); }
+static inline void dthc_home_result_put_shift_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 5, v); }
+static inline int32_t dthc_home_result_get_shift_um(const uint8_t *p)
+{
+    return dthc_get_i32(p + 5);
+}
+static inline void dthc_home_result_put_t_us(uint8_t *p, uint32_t v) { dthc_put_u32(p + 9, v); }
+static inline uint32_t dthc_home_result_get_t_us(const uint8_t *p) { return dthc_get_u32(p + 9); }
+static inline void dthc_pack_home_result(uint8_t *p, const dthc_home_result_t *m)
+{
+    dthc_home_result_put_result(p, m->result);
+    dthc_home_result_put_z_um(p, m->z_um);
+    dthc_home_result_put_shift_um(p, m->shift_um);
+    dthc_home_result_put_t_us(p, m->t_us);
+}
+static inline void dthc_unpack_home_result(const uint8_t *p, dthc_home_result_t *m)
+{
+    m->result = dthc_home_result_get_result(p);
+    m->z_um = dthc_home_result_get_z_um(p);
+    m->shift_um = dthc_home_result_get_shift_um(p);
+    m->t_us = dthc_home_result_get_t_us(p);
+}
+
 /* A message: header plus the payload selected by `type` (a dthc_msg_type_t). */
 typedef struct {
     uint8_t type;
@@ -919,6 +1004,7 @@ typedef struct {
         dthc_query_t query;
         dthc_clock_query_t clock_query;
         dthc_fault_reset_t fault_reset;
+        dthc_z_home_t z_home;
         dthc_ack_t ack;
         dthc_nak_t nak;
         dthc_hello_info_t hello_info;
@@ -929,13 +1015,14 @@ typedef struct {
         dthc_probe_result_t probe_result;
         dthc_status_t status;
         dthc_clock_t clock;
+        dthc_home_result_t home_result;
     } u;
 } dthc_msg_t;
 
-/* Payload sizes of types 0x01..0x0F in order, DTHC_NO_TYPE for a gap: an array
+/* Payload sizes of types 0x01..0x10 in order, DTHC_NO_TYPE for a gap: an array
  * initialiser for dthc_protocol.c's table in flash. */
 #define DTHC_HOST_SIZES_FIRST DTHC_MSG_HELLO
-#define DTHC_HOST_SIZES_LAST DTHC_MSG_Z_PROBE_AWAY
+#define DTHC_HOST_SIZES_LAST DTHC_MSG_Z_HOME
 #define DTHC_HOST_SIZES \
     { \
         DTHC_HELLO_SIZE, \
@@ -953,12 +1040,13 @@ typedef struct {
         DTHC_CLOCK_QUERY_SIZE, \
         DTHC_FAULT_RESET_SIZE, \
         DTHC_Z_PROBE_AWAY_SIZE, \
+        DTHC_Z_HOME_SIZE, \
     }
 
-/* Payload sizes of types 0x80..0x89 in order, DTHC_NO_TYPE for a gap: an array
+/* Payload sizes of types 0x80..0x8A in order, DTHC_NO_TYPE for a gap: an array
  * initialiser for dthc_protocol.c's table in flash. */
 #define DTHC_BOARD_SIZES_FIRST DTHC_MSG_ACK
-#define DTHC_BOARD_SIZES_LAST DTHC_MSG_CLOCK
+#define DTHC_BOARD_SIZES_LAST DTHC_MSG_HOME_RESULT
 #define DTHC_BOARD_SIZES \
     { \
         DTHC_ACK_SIZE, \
@@ -971,6 +1059,7 @@ typedef struct {
         DTHC_PROBE_RESULT_SIZE, \
         DTHC_STATUS_SIZE, \
         DTHC_CLOCK_SIZE, \
+        DTHC_HOME_RESULT_SIZE, \
     }
 
 /* The payload of *m at p: its fixed size, or for SAMPLES the fixed part and
@@ -1014,6 +1103,9 @@ static inline void dthc_pack_payload(uint8_t *p, const dthc_msg_t *m)
     case DTHC_MSG_Z_PROBE_AWAY:
         dthc_pack_z_probe(p, &m->u.z_probe);
         break;
+    case DTHC_MSG_Z_HOME:
+        dthc_pack_z_home(p, &m->u.z_home);
+        break;
     case DTHC_MSG_ACK:
         dthc_pack_ack(p, &m->u.ack);
         break;
@@ -1043,6 +1135,9 @@ static inline void dthc_pack_payload(uint8_t *p, const dthc_msg_t *m)
         break;
     case DTHC_MSG_CLOCK:
         dthc_pack_clock(p, &m->u.clock);
+        break;
+    case DTHC_MSG_HOME_RESULT:
+        dthc_pack_home_result(p, &m->u.home_result);
         break;
     default: /* no payload */
         break;
@@ -1089,6 +1184,9 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     case DTHC_MSG_Z_PROBE_AWAY:
         dthc_unpack_z_probe(p, &m->u.z_probe);
         break;
+    case DTHC_MSG_Z_HOME:
+        dthc_unpack_z_home(p, &m->u.z_home);
+        break;
     case DTHC_MSG_ACK:
         dthc_unpack_ack(p, &m->u.ack);
         break;
@@ -1119,6 +1217,9 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     case DTHC_MSG_CLOCK:
         dthc_unpack_clock(p, &m->u.clock);
         break;
+    case DTHC_MSG_HOME_RESULT:
+        dthc_unpack_home_result(p, &m->u.home_result);
+        break;
     default: /* no payload */
         break;
     }
@@ -1145,6 +1246,7 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     M(CLOCK_QUERY, clock_query, ClockQuery) \
     M(FAULT_RESET, fault_reset, FaultReset) \
     M(Z_PROBE_AWAY, z_probe, ZProbeAway) \
+    M(Z_HOME, z_home, ZHome) \
     M(ACK, ack, Ack) \
     M(NAK, nak, Nak) \
     M(HELLO_INFO, hello_info, HelloInfo) \
@@ -1154,7 +1256,8 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     M(MOTION_DONE, motion_done, MotionDone) \
     M(PROBE_RESULT, probe_result, ProbeResult) \
     M(STATUS, status, Status) \
-    M(CLOCK, clock, Clock)
+    M(CLOCK, clock, Clock) \
+    M(HOME_RESULT, home_result, HomeResult)
 #define DTHC_FOR_EACH_FIELD(F) \
     F(HELLO, hello, proto_major, u) \
     F(HELLO, hello, proto_minor, u) \
@@ -1183,6 +1286,12 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     F(Z_PROBE_AWAY, z_probe, feed_um_s, u) \
     F(Z_PROBE_AWAY, z_probe, max_travel_um, u) \
     F(Z_PROBE_AWAY, z_probe, sensors, u) \
+    F(Z_HOME, z_home, seek_um_s, u) \
+    F(Z_HOME, z_home, locate_um_s, u) \
+    F(Z_HOME, z_home, backoff_um, u) \
+    F(Z_HOME, z_home, max_travel_um, u) \
+    F(Z_HOME, z_home, home_z_um, i) \
+    F(Z_HOME, z_home, timeout_ms, u) \
     F(ACK, ack, boot_id, u) \
     F(NAK, nak, boot_id, u) \
     F(NAK, nak, code, u) \
@@ -1245,6 +1354,10 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     F(STATUS, status, rx_crc_errors, u) \
     F(STATUS, status, rx_framing_errors, u) \
     F(STATUS, status, rx_duplicates, u) \
-    F(CLOCK, clock, t_us, q)
+    F(CLOCK, clock, t_us, q) \
+    F(HOME_RESULT, home_result, result, u) \
+    F(HOME_RESULT, home_result, z_um, i) \
+    F(HOME_RESULT, home_result, shift_um, i) \
+    F(HOME_RESULT, home_result, t_us, u)
 
 #endif /* DTHC_MESSAGES_H */

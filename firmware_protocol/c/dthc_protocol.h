@@ -1,5 +1,5 @@
 /*
- * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.2.
+ * dthc_protocol.h - C99 reference codec of the DTHC board wire protocol, version 1.3.
  *
  * Normative spec: firmware_protocol/PROTOCOL.md. Golden vectors:
  * firmware_protocol/vectors/frames.json (checked by tests/firmware_protocol/test_c_codec.py).
@@ -66,8 +66,9 @@ extern "C" {
 /* --- numbers (PROTOCOL.md sections 1-4, 8; firmware_protocol/constants.py) ------------- */
 
 #define DTHC_PROTOCOL_MAJOR 1
-/* 1.1: the idle lease lapse (PROTOCOL.md section 4); 1.2: Z_PROBE_AWAY (section 6.1) */
-#define DTHC_PROTOCOL_MINOR 2
+/* 1.1: the idle lease lapse (PROTOCOL.md section 4); 1.2: Z_PROBE_AWAY; 1.3: Z_HOME
+ * (section 6.1) */
+#define DTHC_PROTOCOL_MINOR 3
 
 #define DTHC_DELIMITER 0x00
 /* Decoded frame = type(1) seq(1) payload(0..DTHC_MAX_PAYLOAD) crc(2). */
@@ -146,7 +147,8 @@ typedef enum {
     DTHC_STATUS_FAULT_LATCHED = 1 << 2,
     DTHC_STATUS_Z_BUSY = 1 << 3,
     DTHC_STATUS_SAMPLE_OVERFLOW = 1 << 4,
-    DTHC_STATUS_SESSION = 1 << 5
+    DTHC_STATUS_SESSION = 1 << 5,
+    DTHC_STATUS_HOMED = 1 << 6 /* Z homed since power-on (1.3) */
 } dthc_status_bit_t;
 
 /* HELLO_INFO capability bits (masks of the u32). */
@@ -159,7 +161,8 @@ typedef enum {
     DTHC_CAP_CURRENT_OUT = 1 << 5,
     DTHC_CAP_ESTOP = 1 << 6,
     DTHC_CAP_Z_LIMITS = 1 << 7,
-    DTHC_CAP_FILTERS = 1 << 8
+    DTHC_CAP_FILTERS = 1 << 8,
+    DTHC_CAP_HOMING = 1 << 9 /* Z_HOME on a home switch at Z_LIMIT_MAX (1.3) */
 } dthc_capability_t;
 
 /* Latched faults; bit (1u << code) in the 16-bit fault set. */
@@ -203,6 +206,14 @@ typedef enum {
 } dthc_probe_result_code_t;
 
 typedef enum {
+    DTHC_HOME_HOMED = 0,
+    DTHC_HOME_NOT_FOUND = 1,  /* the switch did not close within max travel */
+    DTHC_HOME_TIMEOUT = 2,    /* the cycle outlasted timeout_ms */
+    DTHC_HOME_ABORTED = 3,    /* Z_STOP, a new Z command, a fault or the lease */
+    DTHC_HOME_NO_RELEASE = 4  /* backing off by max travel did not open the switch */
+} dthc_home_outcome_t;
+
+typedef enum {
     DTHC_MOTION_REACHED = 0,
     DTHC_MOTION_STOPPED = 1,
     DTHC_MOTION_LIMIT = 2,
@@ -221,7 +232,8 @@ typedef enum {
     DTHC_QUERY_STATUS = 0,
     DTHC_QUERY_PROBE_RESULT = 1,
     DTHC_QUERY_HELLO_INFO = 2,
-    DTHC_QUERY_MOTION_DONE = 3
+    DTHC_QUERY_MOTION_DONE = 3,
+    DTHC_QUERY_HOME_RESULT = 4 /* 1.3 */
 } dthc_query_what_t;
 
 /* Results of the decoding functions: 0 or one of these. */

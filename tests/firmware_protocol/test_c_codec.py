@@ -64,6 +64,7 @@ ENUM_PREFIX = {
     "NakCode": "DTHC_NAK_",
     "ResetReason": "DTHC_RESET_",
     "ProbeOutcome": "DTHC_PROBE_",
+    "HomeOutcome": "DTHC_HOME_",
     "MotionResult": "DTHC_MOTION_",
     "FilterKind": "DTHC_FILTER_",
     "QueryWhat": "DTHC_QUERY_",
@@ -682,7 +683,7 @@ def _framed(body: bytes) -> bytes:
 REJECTS: list[tuple[bytes, str]] = [
     (b"\x7f\x2a" + b"abc", "UNKNOWN_TYPE"),
     (b"\x00\x09", "UNKNOWN_TYPE"),
-    (b"\x8a\xc8" + bytes(8), "UNKNOWN_TYPE"),
+    (b"\x8b\xc8" + bytes(8), "UNKNOWN_TYPE"),
     (b"\x04\x2b\x01\x01", "BAD_LENGTH"),  # TORCH with 2 bytes
     (b"\x02\xff\x00", "BAD_LENGTH"),  # HEARTBEAT with a payload byte
     (b"\x01\x05" + bytes(5), "BAD_LENGTH"),  # HELLO one byte short
