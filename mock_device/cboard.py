@@ -151,7 +151,8 @@ class CBoard:
         lib.host_hal.restype = ctypes.POINTER(HostHal)
         lib.host_init.argtypes = [
             ctypes.c_char_p, ctypes.c_uint32, ctypes.c_int32, ctypes.c_int32, ctypes.c_int32,
-            ctypes.c_int32, ctypes.c_int32, ctypes.c_uint16, ctypes.c_uint8, ctypes.c_uint32,
+            ctypes.c_int32, ctypes.c_int32, ctypes.c_uint16, ctypes.c_uint8, ctypes.c_int32,
+            ctypes.c_uint32,
         ]  # fmt: skip
         lib.host_init.restype = None
         lib.host_rx.argtypes = [ctypes.c_char_p, ctypes.c_uint32]
@@ -170,12 +171,12 @@ class CBoard:
     def init(
         self, *, serial: str, capabilities: int, z_min_um: int, z_max_um: int, z_boot_um: int,
         z_max_speed_um_s: int, z_accel_um_s2: int, z_steps_per_mm: int, reset_reason: int,
-        entropy: int,
+        z_home_um: int, entropy: int,
     ) -> None:  # fmt: skip
         """Power-on (board_init) with this hardware description."""
         self._lib.host_init(
             serial.encode("ascii"), capabilities, z_min_um, z_max_um, z_boot_um,
-            z_max_speed_um_s, z_accel_um_s2, z_steps_per_mm, reset_reason, entropy,
+            z_max_speed_um_s, z_accel_um_s2, z_steps_per_mm, reset_reason, z_home_um, entropy,
         )  # fmt: skip
 
     def receive(self, data: bytes) -> None:

@@ -29,7 +29,9 @@
 #else
 #define CAPS_THC 0
 #endif
-#if DTHC_HAS_Z_LIMIT_INPUTS
+#if DTHC_HAS_Z_LIMIT_INPUTS && BOARD_HOMING
+#define CAPS_LIMITS (DTHC_CAP_Z_LIMITS | DTHC_CAP_HOMING) /* the home switch is Z_LIMIT_MAX */
+#elif DTHC_HAS_Z_LIMIT_INPUTS
 #define CAPS_LIMITS DTHC_CAP_Z_LIMITS
 #else
 #define CAPS_LIMITS 0
@@ -80,6 +82,9 @@ static board_config_t config = {
     DTHC_Z_ACCEL_UM_S2,
     DTHC_Z_STEPS_PER_MM,
     0,
+#if BOARD_HOMING
+    DTHC_Z_HOME_UM,
+#endif
 };
 
 int main(void)

@@ -111,7 +111,10 @@
 #define DTHC_Z_MAX_UM 100000
 #endif
 #ifndef DTHC_Z_BOOT_UM
-#define DTHC_Z_BOOT_UM 60000 /* Z at power-on (the board has no homing: park it here) */
+#define DTHC_Z_BOOT_UM 60000 /* Z at power-on, until homed (unhomed: park it here) */
+#endif
+#ifndef DTHC_Z_HOME_UM
+#define DTHC_Z_HOME_UM 102000 /* where the home switch (Z_LIMIT_MAX) trips: 2 mm above max */
 #endif
 #ifndef DTHC_Z_MAX_SPEED_UM_S
 #define DTHC_Z_MAX_SPEED_UM_S 60000

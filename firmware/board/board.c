@@ -78,6 +78,11 @@ uint8_t board_status_bits(void)
     if (B.session) {
         s |= DTHC_STATUS_SESSION;
     }
+#if BOARD_HOMING
+    if (B.homed) {
+        s |= DTHC_STATUS_HOMED;
+    }
+#endif
     return s;
 }
 
@@ -228,11 +233,11 @@ static void check_safety(void)
         board_latch(DTHC_FAULT_ESTOP, 0);
     }
     /* A limit switch stops motion towards it at once (the step generator's bounds) and
-     * latches Z_LIMIT when Z was driven into it. */
+     * latches Z_LIMIT when Z was driven into it; homing seeks the top one on purpose. */
     if ((in & (1u << DTHC_INPUT_Z_LIMIT_MIN)) && B.z_v_um_s < 0) {
         board_latch(DTHC_FAULT_Z_LIMIT, 0);
     }
-    if ((in & (1u << DTHC_INPUT_Z_LIMIT_MAX)) && B.z_v_um_s > 0) {
+    if ((in & (1u << DTHC_INPUT_Z_LIMIT_MAX)) && B.z_v_um_s > 0 && B.z_mode != Z_HOME) {
         board_latch(DTHC_FAULT_Z_LIMIT, 1);
     }
     if (B.torch && B.arc_lost_ms) {

@@ -27,6 +27,11 @@
  * for the conformance suite to catch. */
 #define BOARD_LEASE_IDLE_LAPSE 1
 #endif
+#ifndef BOARD_HOMING
+/* 1: Z_HOME (protocol 1.3) is built in; it runs only on a board whose capabilities say
+ * HOMING (a home switch on Z_LIMIT_MAX). 0: left out (the Nano: no switch pins, no RAM). */
+#define BOARD_HOMING 1
+#endif
 #ifndef BOARD_CURRENT_OUT
 #define BOARD_CURRENT_OUT 0 /* 1: SET_CURRENT drives hal_set_current_da (CURRENT_OUT) */
 #endif
@@ -46,6 +51,9 @@ typedef struct {
     int32_t z_accel_um_s2;
     uint16_t z_steps_per_mm;
     uint8_t reset_reason;    /* PROTOCOL.md section 6.2 table */
+#if BOARD_HOMING
+    int32_t z_home_um;       /* Z where the home switch (Z_LIMIT_MAX) trips: above z_max_um */
+#endif
 } board_config_t;
 
 /* Start: no session, torch off, Z idle, 1 kHz x 5, filter none, cal 0.01 V per count. The

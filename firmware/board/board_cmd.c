@@ -227,6 +227,13 @@ static void cmd_query(uint8_t seq, uint8_t what)
         B.last_motion.seq = seq;
         board_send_motion_done();
         B.last_motion.seq = ended;
+#if BOARD_HOMING
+    } else if (what == DTHC_QUERY_HOME_RESULT && B.last_home.valid) {
+        uint8_t ended = B.last_home.seq;
+        B.last_home.seq = seq;
+        board_send_home_result();
+        B.last_home.seq = ended;
+#endif
     } else {
         send_outcome(seq, DTHC_NAK_OUT_OF_RANGE, 0);
     }
@@ -286,6 +293,40 @@ static void cmd_z_probe(uint8_t seq, const uint8_t *p, bool away)
         reply(seq, 0, 0);
         board_z_probe(seq, feed, travel, sensors, away);
     }
+}
+
+/* Z_HOME (1.3): the refusals of PROTOCOL.md section 6.1, then the cycle (board_motion.c). */
+static void cmd_z_home(uint8_t seq, const uint8_t *p)
+{
+#if BOARD_HOMING
+    uint32_t seek = dthc_z_home_get_seek_um_s(p);
+    uint32_t locate = dthc_z_home_get_locate_um_s(p);
+    uint32_t backoff = dthc_z_home_get_backoff_um(p);
+    uint32_t travel = dthc_z_home_get_max_travel_um(p);
+    uint16_t timeout = dthc_z_home_get_timeout_ms(p);
+    int32_t park = B.cfg->z_home_um - (int32_t)(backoff > 0x10000000UL ? 0x10000000UL : backoff);
+    if (!(B.cfg->capabilities & DTHC_CAP_HOMING)) {
+        reply(seq, DTHC_NAK_UNSUPPORTED, 9);
+    } else if (B.faults) {
+        reply(seq, DTHC_NAK_FAULT_LATCHED, board_lowest_fault());
+    } else if (seek == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 0);
+    } else if (locate == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 1);
+    } else if (backoff == 0 || park < B.cfg->z_min_um || park > B.cfg->z_max_um) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 2);
+    } else if (travel == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 3);
+    } else if (timeout == 0) {
+        reply(seq, DTHC_NAK_OUT_OF_RANGE, 4);
+    } else {
+        reply(seq, 0, 0);
+        board_z_home(seq, seek, locate, backoff, travel, timeout);
+    }
+#else
+    (void)p;
+    reply(seq, DTHC_NAK_UNSUPPORTED, 9); /* built without homing: no switch input */
+#endif
 }
 
 static void cmd_fault_reset(uint8_t seq, uint16_t mask)
@@ -356,6 +397,9 @@ static void command(uint8_t type, uint8_t seq, const uint8_t *p)
         break;
     case DTHC_MSG_Z_PROBE_AWAY:
         cmd_z_probe(seq, p, true);
+        break;
+    case DTHC_MSG_Z_HOME:
+        cmd_z_home(seq, p);
         break;
     case DTHC_MSG_Z_STOP:
         board_z_end(DTHC_MOTION_STOPPED, DTHC_PROBE_ABORTED);

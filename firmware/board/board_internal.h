@@ -20,6 +20,7 @@
 typedef char board_small_reports_fit[(DTHC_FAULT_SIZE <= BOARD_SMALL_PAYLOAD
                                       && DTHC_PROBE_RESULT_SIZE <= BOARD_SMALL_PAYLOAD
                                       && DTHC_MOTION_DONE_SIZE <= BOARD_SMALL_PAYLOAD
+                                      && DTHC_HOME_RESULT_SIZE <= BOARD_SMALL_PAYLOAD
                                       && DTHC_NAK_SIZE <= BOARD_SMALL_PAYLOAD) ? 1 : -1];
 #define BOARD_SMALL_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_SMALL_PAYLOAD + 6)
 /* SAMPLES, encoded in place where the samples were collected (dthc_encode_in_place). */
@@ -31,7 +32,18 @@ typedef char board_query_replies_fit[(DTHC_STATUS_SIZE <= BOARD_QUERY_PAYLOAD
                                       && DTHC_CLOCK_SIZE <= BOARD_QUERY_PAYLOAD) ? 1 : -1];
 #define BOARD_QUERY_TX (DTHC_TX_PAYLOAD_OFFSET + BOARD_QUERY_PAYLOAD + 6)
 
-typedef enum { Z_IDLE, Z_MOVE, Z_PROBE, Z_VELOCITY, Z_STOPPING } z_mode_t;
+typedef enum { Z_IDLE, Z_MOVE, Z_PROBE, Z_VELOCITY, Z_STOPPING, Z_HOME } z_mode_t;
+
+/* The steps of a Z_HOME cycle (PROTOCOL.md section 6.1), in the order they run. */
+typedef enum {
+    HOME_OFF_FIRST,   /* the switch was closed at the start: down until it opens */
+    HOME_CLEAR_FIRST, /* then down backoff_um more */
+    HOME_SEEK,        /* up fast until it closes */
+    HOME_OFF,         /* down until it opens */
+    HOME_CLEAR,       /* then down backoff_um more */
+    HOME_LOCATE,      /* up slowly until it closes: the home position */
+    HOME_RETRACT      /* down to the home position less backoff_um */
+} home_phase_t;
 
 /* The host lease (PROTOCOL.md section 4): running; ran out at rest (reported, nothing
  * latched: the next valid frame renews it); ran out in use (LEASE_EXPIRED latched: only
@@ -61,6 +73,15 @@ typedef struct {
     int32_t stop_z_um;
     uint32_t t_us;
 } probe_report_t;
+
+typedef struct {
+    uint8_t valid;
+    uint8_t seq;
+    uint8_t result;
+    int32_t z_um;
+    int32_t shift_um;
+    uint32_t t_us;
+} home_report_t;
 
 typedef struct {
     const board_config_t *cfg;
@@ -138,6 +159,21 @@ typedef struct {
     uint32_t zvel_expiry_us;
     motion_report_t last_motion;
     probe_report_t last_probe;
+#if BOARD_HOMING
+    int32_t z_base_um;      /* Z at step count 0: the boot position, until homed */
+    bool homed;             /* status HOMED: z_base_um came from the home switch */
+    uint8_t home_seq;       /* running Z_HOME's seq, 0 for none */
+    uint8_t home_phase;     /* home_phase_t */
+    uint8_t home_outcome;   /* BOARD_NO_OUTCOME while running */
+    int32_t home_seek_um_s;
+    int32_t home_locate_um_s;
+    int32_t home_backoff_um;
+    int32_t home_lo_steps;  /* max_travel_um either side of where homing started */
+    int32_t home_hi_steps;
+    int32_t home_shift_um;
+    uint32_t home_deadline_us;
+    home_report_t last_home;
+#endif
 } board_t;
 
 extern board_t B;
@@ -173,5 +209,10 @@ void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint
 void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms);
 void board_send_motion_done(void);
 void board_send_probe_result(void);
+#if BOARD_HOMING
+void board_z_home(uint8_t seq, uint32_t seek_um_s, uint32_t locate_um_s, uint32_t backoff_um,
+                  uint32_t max_travel_um, uint16_t timeout_ms);
+void board_send_home_result(void);
+#endif
 
 #endif /* DTHC_BOARD_INTERNAL_H */

@@ -1,7 +1,7 @@
 /*
  * board_motion.c - Z: trapezoidal Z_MOVE, Z_PROBE with its stop on contact (Z_PROBE_AWAY:
  * up, stopped on the release of every sensor of its set), Z_VELOCITY
- * with expiry, Z_STOP, soft limits. Runs once per tick: the velocity ramps towards what
+ * with expiry, Z_STOP, soft limits, Z_HOME on the home switch (protocol 1.3). Runs once per tick: the velocity ramps towards what
  * the mode wants by at most the acceleration limit per tick, and the step generator gets
  * bounds it never steps past (a move's target, a probe's end, the soft limits, an active
  * limit switch), so a late tick cannot overshoot them.
@@ -21,6 +21,15 @@ static int32_t creep_um_s;    /* the slowest approach: Z stops from it within on
 /* Z idle at rest, and the step generator told so by the tick that stopped it: until a
  * command starts a motion, a tick has nothing to do for Z (about 25 us saved per tick). */
 static bool z_at_rest;
+
+static int32_t approach_um_s(int32_t d_um, int32_t feed);
+
+/* Z at step count 0: the boot position, moved by homing (a build without it: fixed). */
+#if BOARD_HOMING
+#define Z_BASE_UM B.z_base_um
+#else
+#define Z_BASE_UM B.cfg->z_boot_um
+#endif
 
 static uint32_t isqrt32(uint32_t x)
 {
@@ -56,7 +65,7 @@ static int32_t brake_um_s(int32_t d_um)
 
 static int32_t steps_of(int32_t um)
 {
-    return (um - B.cfg->z_boot_um) * (int32_t)B.cfg->z_steps_per_mm / 1000;
+    return (um - Z_BASE_UM) * (int32_t)B.cfg->z_steps_per_mm / 1000;
 }
 
 static int32_t um_of_steps(int32_t steps)
@@ -64,7 +73,7 @@ static int32_t um_of_steps(int32_t steps)
     /* steps * k / 1024 rounded towards 0, by shifts: avr-gcc -Os calls the 32-bit division
      * (about 40 us) for a signed "/ 1024". */
     int32_t x = steps * um_per_step_q10;
-    return B.cfg->z_boot_um
+    return Z_BASE_UM
            + (x < 0 ? -(int32_t)((uint32_t)-x >> 10) : (int32_t)((uint32_t)x >> 10));
 }
 
@@ -89,6 +98,9 @@ void board_z_init(void)
     brake_full_um = (int32_t)(vmax * vmax / (2u * (uint32_t)c->z_accel_um_s2)) + 1;
     um_per_step_q10 = (int32_t)(1024000UL / c->z_steps_per_mm);
     steps_per_um_q14 = (int32_t)(((uint32_t)c->z_steps_per_mm * 16384UL + 500u) / 1000u);
+#if BOARD_HOMING
+    B.z_base_um = c->z_boot_um; /* no homing yet: Z is taken where it stands at power-on */
+#endif
     min_steps = steps_of(c->z_min_um);
     max_steps = steps_of(c->z_max_um);
     board_z_update_dv();
@@ -148,7 +160,42 @@ static void probe_done(int32_t z_um)
     board_send_probe_result();
 }
 
-/* End a running move or probe early, reporting it (the caller decides how Z stops). */
+#if BOARD_HOMING
+void board_send_home_result(void)
+{
+    uint8_t *p = BOARD_SMALL_PAYLOAD_AT;
+    dthc_home_result_put_result(p, B.last_home.result);
+    dthc_home_result_put_z_um(p, B.last_home.z_um);
+    dthc_home_result_put_shift_um(p, B.last_home.shift_um);
+    dthc_home_result_put_t_us(p, B.last_home.t_us);
+    board_send_small(DTHC_MSG_HOME_RESULT, B.last_home.seq, DTHC_HOME_RESULT_SIZE);
+}
+
+static void home_done(int32_t z_um)
+{
+    B.last_home.valid = 1;
+    B.last_home.seq = B.home_seq;
+    B.last_home.result = B.home_outcome;
+    B.last_home.z_um = z_um;
+    B.last_home.shift_um = B.home_outcome == DTHC_HOME_HOMED ? B.home_shift_um : 0;
+    B.last_home.t_us = hal_time_us();
+    B.home_seq = 0;
+    board_send_home_result();
+}
+
+/* um as steps, for lengths up to metres on any steps_per_mm (no 32-bit overflow). */
+static int32_t length_steps(uint32_t um)
+{
+    uint32_t spm = B.cfg->z_steps_per_mm;
+    if (um > 10000000UL) {
+        um = 10000000UL; /* 10 m: more than any Z travels */
+    }
+    return (int32_t)((um / 1000u) * spm + (um % 1000u) * spm / 1000u);
+}
+#endif
+
+/* End a running move, probe or homing early, reporting it (the caller decides how Z
+ * stops). */
 void board_z_end(uint8_t move_result, uint8_t probe_result)
 {
     int32_t z = board_z_um();
@@ -159,6 +206,12 @@ void board_z_end(uint8_t move_result, uint8_t probe_result)
         B.probe_outcome = probe_result;
         probe_done(z);
     }
+#if BOARD_HOMING
+    if (B.home_seq) {
+        B.home_outcome = DTHC_HOME_ABORTED;
+        home_done(z);
+    }
+#endif
     if (B.z_mode != Z_IDLE) {
         B.z_mode = Z_STOPPING;
     }
@@ -209,9 +262,118 @@ void board_z_probe(uint8_t seq, uint32_t feed_um_s, uint32_t max_travel_um, uint
     }
 }
 
+#if BOARD_HOMING
+void board_z_home(uint8_t seq, uint32_t seek_um_s, uint32_t locate_um_s, uint32_t backoff_um,
+                  uint32_t max_travel_um, uint16_t timeout_ms)
+{
+    int32_t steps = hal_z_steps();
+    int32_t travel = length_steps(max_travel_um);
+    uint32_t vmax = (uint32_t)B.cfg->z_max_speed_um_s;
+    board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
+    B.homed = false; /* until this cycle finds the switch again */
+    B.z_mode = Z_HOME;
+    B.home_seq = seq;
+    B.home_outcome = BOARD_NO_OUTCOME;
+    B.home_seek_um_s = (int32_t)(seek_um_s > vmax ? vmax : seek_um_s);
+    B.home_locate_um_s = (int32_t)(locate_um_s > vmax ? vmax : locate_um_s);
+    B.home_backoff_um = (int32_t)backoff_um; /* within the soft limits: checked on receipt */
+    B.home_lo_steps = steps - travel;
+    B.home_hi_steps = steps + travel;
+    B.home_shift_um = 0;
+    B.home_deadline_us = hal_time_us() + (uint32_t)timeout_ms * 1000u;
+    B.home_phase = (B.inputs & (1u << DTHC_INPUT_Z_LIMIT_MAX)) ? HOME_OFF_FIRST : HOME_SEEK;
+}
+
+/* One tick of Z_HOME: sets the speed Z wants and the step generator's bounds. */
+static int32_t home_tick(int32_t steps, int32_t z, int32_t *lo, int32_t *hi)
+{
+    bool closed = (B.inputs & (1u << DTHC_INPUT_Z_LIMIT_MAX)) != 0;
+    int32_t want = 0;
+    *lo = B.home_lo_steps; /* the soft limits do not hold until Z is found */
+    *hi = B.home_hi_steps;
+    if (B.home_outcome == BOARD_NO_OUTCOME && (int32_t)(B.now_us - B.home_deadline_us) >= 0) {
+        B.home_outcome = DTHC_HOME_TIMEOUT;
+    }
+    if (B.home_outcome != BOARD_NO_OUTCOME) {
+        if (B.z_v_um_s == 0) {
+            B.z_mode = Z_IDLE;
+            home_done(z);
+        }
+        return 0;
+    }
+    switch (B.home_phase) {
+    case HOME_OFF_FIRST:
+    case HOME_OFF:
+        if (!closed) { /* released: on down by the backoff (one division, once) */
+            target_steps = steps_of(z - B.home_backoff_um);
+            if (target_steps < *lo) {
+                target_steps = *lo;
+            }
+            B.home_phase++;
+        } else if (steps <= *lo) {
+            B.home_outcome = DTHC_HOME_NO_RELEASE;
+        } else {
+            want = -approach_um_s(z - um_of_steps(*lo), B.home_seek_um_s);
+        }
+        break;
+    case HOME_CLEAR_FIRST:
+    case HOME_CLEAR:
+    case HOME_RETRACT:
+        if (steps == target_steps) { /* from creep speed, as a Z_MOVE ends */
+            B.z_v_um_s = 0;
+            if (B.home_phase == HOME_RETRACT) {
+                B.homed = true;
+                B.home_outcome = DTHC_HOME_HOMED;
+                B.z_mode = Z_IDLE;
+                home_done(z);
+            } else {
+                B.home_phase++; /* CLEAR_FIRST -> SEEK, CLEAR -> LOCATE */
+            }
+        } else if (steps > target_steps) {
+            *lo = target_steps;
+            want = -approach_um_s(z - um_of_steps(target_steps), B.home_seek_um_s);
+        } else {
+            *hi = target_steps;
+            want = approach_um_s(um_of_steps(target_steps) - z, B.home_seek_um_s);
+        }
+        break;
+    case HOME_SEEK:
+    case HOME_LOCATE:
+        if (closed) {
+            if (B.home_phase == HOME_LOCATE) {
+                /* Found: this count is the home position from now on. */
+                B.home_shift_um = B.cfg->z_home_um - z;
+                B.z_base_um += B.home_shift_um;
+                min_steps = steps_of(B.cfg->z_min_um);
+                max_steps = steps_of(B.cfg->z_max_um);
+                target_steps = steps_of(B.cfg->z_home_um - B.home_backoff_um);
+                B.home_phase = HOME_RETRACT;
+            } else {
+                B.home_phase = HOME_OFF;
+            }
+        } else if (steps >= *hi) {
+            B.home_outcome = DTHC_HOME_NOT_FOUND;
+        } else {
+            want = approach_um_s(um_of_steps(*hi) - z, B.home_phase == HOME_SEEK
+                                                           ? B.home_seek_um_s
+                                                           : B.home_locate_um_s);
+        }
+        break;
+    default:
+        break;
+    }
+    return want;
+}
+#endif
+
 void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms)
 {
     int32_t vmax = B.cfg->z_max_speed_um_s;
+#if BOARD_HOMING
+    if (B.home_seq) {
+        board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
+    }
+#endif
     if (B.move_seq || B.probe_seq) {
         board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
     }
@@ -342,6 +504,12 @@ void board_z_tick(void)
             B.z_mode = Z_IDLE;
         }
         break;
+#if BOARD_HOMING
+    case Z_HOME:
+        want = home_tick(steps, z, &lo, &hi);
+        v = B.z_v_um_s; /* home_tick sets it to 0 where a step ends at its target */
+        break;
+#endif
     default:
         break;
     }

@@ -87,7 +87,7 @@ host_hal_t *host_hal(void)
 void host_init(const char *serial_number, uint32_t capabilities, int32_t z_min_um,
                int32_t z_max_um, int32_t z_boot_um, int32_t z_max_speed_um_s,
                int32_t z_accel_um_s2, uint16_t z_steps_per_mm, uint8_t reset_reason,
-               uint32_t entropy32)
+               int32_t z_home_um, uint32_t entropy32)
 {
     memset(&H, 0, sizeof H);
     rx_len = rx_pos = 0;
@@ -105,6 +105,11 @@ void host_init(const char *serial_number, uint32_t capabilities, int32_t z_min_u
     config.z_accel_um_s2 = z_accel_um_s2;
     config.z_steps_per_mm = z_steps_per_mm;
     config.reset_reason = reset_reason;
+#if BOARD_HOMING
+    config.z_home_um = z_home_um;
+#else
+    (void)z_home_um;
+#endif
     entropy = entropy32;
     board_init(&config, entropy32);
 }

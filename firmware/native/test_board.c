@@ -19,8 +19,9 @@
 
 static const board_config_t CONFIG = {
     "DTHC-TEST-0001",
-    DTHC_CAP_OHMIC | DTHC_CAP_FLOAT | DTHC_CAP_BREAKAWAY | DTHC_CAP_ESTOP | DTHC_CAP_FILTERS,
-    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON,
+    DTHC_CAP_OHMIC | DTHC_CAP_FLOAT | DTHC_CAP_BREAKAWAY | DTHC_CAP_ESTOP | DTHC_CAP_FILTERS
+        | DTHC_CAP_Z_LIMITS | DTHC_CAP_HOMING,
+    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON, 102000,
 };
 
 typedef struct {
@@ -1292,7 +1293,7 @@ static int test_unsupported_and_lease_range(void)
 static const board_config_t CONFIG_XY = {
     "DTHC-TEST-0002",
     DTHC_CAP_XY_SPEED | DTHC_CAP_CURRENT_OUT | DTHC_CAP_OHMIC | DTHC_CAP_FLOAT,
-    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON,
+    0, 100000, 60000, 60000, 650000, 200, DTHC_RESET_POWER_ON, 102000,
 };
 
 static int test_xy_speed_and_current_out(void)
@@ -1433,6 +1434,189 @@ static int test_a_reply_waits_for_room_without_waiting_in_the_loop(void)
 }
 
 typedef int (*test_fn)(void);
+
+/* --- Z_HOME (protocol 1.3) ------------------------------------------------------------ */
+
+static uint8_t z_home(uint32_t seek, uint32_t locate, uint32_t backoff, uint32_t travel,
+                      uint16_t timeout_ms)
+{
+    uint8_t p[DTHC_Z_HOME_SIZE];
+    dthc_z_home_put_seek_um_s(p, seek);
+    dthc_z_home_put_locate_um_s(p, locate);
+    dthc_z_home_put_backoff_um(p, backoff);
+    dthc_z_home_put_max_travel_um(p, travel);
+    dthc_z_home_put_timeout_ms(p, timeout_ms);
+    return send(DTHC_MSG_Z_HOME, p, DTHC_Z_HOME_SIZE);
+}
+
+/* A home switch where the step count reaches switch_steps (-1: none), read every 50 us;
+ * run until HOME_RESULT seq arrives or ms pass, a heartbeat every 100 ms. Returns the
+ * HOME_RESULT, or NULL. *peak: the highest step count seen. */
+static const frame_t *home_until(uint8_t seq, uint32_t ms, int32_t switch_steps, int32_t *peak)
+{
+    uint32_t t;
+    int k;
+    for (t = 0; t < ms; t++) {
+        for (k = 0; k < 20; k++) {
+            F.inputs = (uint16_t)((switch_steps >= 0 && F.steps >= switch_steps)
+                                      ? (F.inputs | IN(Z_LIMIT_MAX))
+                                      : (F.inputs & ~IN(Z_LIMIT_MAX)));
+            fake_run_us(50u);
+            if (peak && F.steps > *peak) {
+                *peak = F.steps;
+            }
+        }
+        while (board_poll()) {
+        }
+        if (t % 100 == 99) {
+            send(DTHC_MSG_HEARTBEAT, NULL, 0);
+        }
+        parse();
+        if (last(DTHC_MSG_HOME_RESULT, seq, 0)) {
+            return last(DTHC_MSG_HOME_RESULT, seq, 0);
+        }
+    }
+    return NULL;
+}
+
+static void quiet_batches(void)
+{
+    hello();
+    cmd_u16(DTHC_MSG_SET_LEASE, 2000);
+    configure(1000, 100, DTHC_FILTER_NONE, 0, 0, 0, 0.01f); /* fewer frames to parse */
+}
+
+/* Seek, back off, re-seek slowly: the trip becomes the home position (102 mm), Z parks
+ * 2 mm below it, HOMED is set, the switch latches nothing; a second homing finds the same
+ * position within a step (shift_um: the repeatability), and the soft limits hold from it. */
+static int test_home_finds_the_switch_and_sets_z(void)
+{
+    const int32_t sw = 4000; /* the board's count at the trip: 80 mm on its boot Z */
+    const frame_t *f;
+    int32_t peak = 0, shift;
+    uint8_t seq;
+    quiet_batches();
+    CHECK(!(status_bits() & DTHC_STATUS_HOMED), "HOMED set at power-on");
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    CHECK(is_ack(seq, 0), "Z_HOME refused");
+    f = home_until(seq, 15000, sw, &peak);
+    CHECK(f, "no HOME_RESULT");
+    CHECK(dthc_home_result_get_result(f->p) == DTHC_HOME_HOMED, "result %u",
+          (unsigned)dthc_home_result_get_result(f->p));
+    shift = dthc_home_result_get_shift_um(f->p);
+    CHECK(shift >= 22000 - 10 && shift <= 22000 + 10, "shift %ld, not 22 mm", (long)shift);
+    CHECK(dthc_home_result_get_z_um(f->p) == 100000, "parked at %ld",
+          (long)dthc_home_result_get_z_um(f->p));
+    CHECK(z_um() == 100000 && (status_bits() & DTHC_STATUS_HOMED), "not homed at 100 mm");
+    CHECK(!faults(), "the home switch latched a fault (%#x)", (unsigned)faults());
+    CHECK(peak - sw < 40, "ran %d steps past the switch", (int)(peak - sw));
+    /* Home again: the same switch, the same count (a board that lost no step). */
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    f = home_until(seq, 15000, sw, NULL);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_HOMED, "second homing failed");
+    shift = dthc_home_result_get_shift_um(f->p);
+    CHECK(shift >= -10 && shift <= 10, "second homing moved Z by %ld um", (long)shift);
+    /* The soft limits now hold from the home position: Z max is 100 mm, the switch 102. */
+    seq = z_move(100001, 20000);
+    CHECK(nak_code(seq, 0, NULL) == DTHC_NAK_OUT_OF_RANGE, "a move above Z max accepted");
+    return 0;
+}
+
+/* Started on the switch: off it first, then the cycle. */
+static int test_home_starting_on_the_switch_backs_off_first(void)
+{
+    const frame_t *f;
+    uint8_t seq;
+    quiet_batches();
+    F.steps = 4100; /* the carriage sits on the switch (a hand put it there) */
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    f = home_until(seq, 15000, 4000, NULL);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_HOMED, "not homed from the switch");
+    /* the switch at count 4000 is 102 mm now: parked 2 mm (400 steps) below it */
+    CHECK(z_um() == 100000 && F.steps >= 3600 - 2 && F.steps <= 3600 + 2,
+          "parked at %ld (steps %d)", (long)z_um(), (int)F.steps);
+    return 0;
+}
+
+/* No switch within max travel: NOT_FOUND, unhomed, stopped near start + travel; a cycle
+ * that outlasts its timeout: TIMEOUT; Z_STOP, a new move or the lease: ABORTED. */
+static int test_home_ends_not_found_timeout_and_aborted(void)
+{
+    const frame_t *f;
+    uint8_t seq;
+    int32_t z;
+    quiet_batches();
+    seq = z_home(20000, 2000, 2000, 10000, 15000);
+    f = home_until(seq, 5000, -1, NULL);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_NOT_FOUND, "not NOT_FOUND");
+    z = z_um();
+    CHECK(z >= 69900 && z <= 70000, "stopped at %ld, not within 10 mm of 60", (long)z);
+    CHECK(!(status_bits() & DTHC_STATUS_HOMED), "HOMED after NOT_FOUND");
+    seq = z_home(1000, 1000, 2000, 150000, 300); /* 1 mm/s: never there in 0.3 s */
+    f = home_until(seq, 2000, -1, NULL);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_TIMEOUT, "not TIMEOUT");
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    home_until(seq, 200, -1, NULL);
+    send(DTHC_MSG_Z_STOP, NULL, 0);
+    run_ms(1);
+    f = last(DTHC_MSG_HOME_RESULT, seq, 0);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_ABORTED, "Z_STOP: not ABORTED");
+    run_ms(200);
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    home_until(seq, 200, -1, NULL);
+    z_move(50000, 20000);
+    run_ms(1);
+    f = last(DTHC_MSG_HOME_RESULT, seq, 0);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_ABORTED, "Z_MOVE: not ABORTED");
+    run_ms(3000);
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    run_ms(2100); /* the host falls silent: the lease ends homing */
+    f = last(DTHC_MSG_HOME_RESULT, seq, 0);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_ABORTED, "lease: not ABORTED");
+    CHECK(faults() & FAULT(LEASE_EXPIRED), "no LEASE_EXPIRED");
+    /* the last HOME_RESULT again, on asking */
+    seq = cmd_u8(DTHC_MSG_QUERY, DTHC_QUERY_HOME_RESULT);
+    f = last(DTHC_MSG_HOME_RESULT, seq, 0);
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_ABORTED, "QUERY HOME_RESULT");
+    return 0;
+}
+
+/* The refusals of PROTOCOL.md 6.1, each naming its field; nothing moves. */
+static int test_home_refusals(void)
+{
+    uint8_t seq, detail = 0xFF;
+    quiet_batches();
+    seq = z_home(0, 2000, 2000, 150000, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 0, "zero seek");
+    seq = z_home(20000, 0, 2000, 150000, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 1, "zero locate");
+    seq = z_home(20000, 2000, 0, 150000, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 2, "zero backoff");
+    seq = z_home(20000, 2000, 103000, 150000, 15000); /* parks below Z min */
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 2, "backoff too far");
+    seq = z_home(20000, 2000, 2000, 0, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 3, "zero travel");
+    seq = z_home(20000, 2000, 2000, 150000, 0);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_OUT_OF_RANGE && detail == 4, "zero timeout");
+    run_ms(20);
+    CHECK(F.steps == 0 && F.rate == 0, "a refused Z_HOME moved Z");
+    F.inputs = IN(ESTOP);
+    run_ms(2);
+    F.inputs = 0;
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_FAULT_LATCHED, "homing with a fault latched");
+    /* a board without the HOMING capability (no home switch) */
+    fake_reset();
+    board_init(&CONFIG_XY, 1u);
+    dthc_rx_init(&host_rx);
+    n_out = parsed_to = 0;
+    hello();
+    seq = z_home(20000, 2000, 2000, 150000, 15000);
+    CHECK(nak_code(seq, 0, &detail) == DTHC_NAK_UNSUPPORTED && detail == 9, "no HOMING: %d",
+          nak_code(seq, 0, NULL));
+    return 0;
+}
+
 static const struct {
     const char *name;
     test_fn fn;
@@ -1475,6 +1659,10 @@ static const struct {
     T(limit_switch_stops_and_latches),
     T(frames_lost_in_the_receiver_count_as_framing_errors),
     T(a_reply_waits_for_room_without_waiting_in_the_loop),
+    T(home_finds_the_switch_and_sets_z),
+    T(home_starting_on_the_switch_backs_off_first),
+    T(home_ends_not_found_timeout_and_aborted),
+    T(home_refusals),
 #undef T
 };
 #define N_TESTS (sizeof TESTS / sizeof TESTS[0])
