@@ -218,13 +218,12 @@ MESSAGES: tuple[MessageDecl, ...] = (
             Field("locate_um_s", "u32", "µm/s", doc="the slow re-seek that sets the position"),
             Field("backoff_um", "u32", "µm", doc="off the switch before the re-seek, and after"),
             Field("max_travel_um", "u32", "µm", doc="the seek's longest travel"),
-            Field("home_z_um", "i32", "µm", doc="Z at the switch's trip point"),
             Field("timeout_ms", "u16", "ms"),
         ),
         doc="Home Z on its home switch (Z_LIMIT_MAX, up, away from the plate): seek, back\n"
         "off, re-seek slowly, back off (protocol 1.3); HOME_RESULT follows.",
         reply="ACK, later HOME_RESULT",
-        note="home_z_um ≥ z_max_um; home_z_um - backoff_um within the soft limits",
+        note="every field > 0; the home position less backoff_um within the soft limits",
         since="1.3",
     ),
     # --- board to host (PROTOCOL.md 6.2) --------------------------------------------------

@@ -168,7 +168,6 @@ class ZHome(NamedTuple):
     locate_um_s: int  # the slow re-seek that sets the position
     backoff_um: int  # off the switch before the re-seek, and after
     max_travel_um: int  # the seek's longest travel
-    home_z_um: int  # Z at the switch's trip point
     timeout_ms: int
 
 
@@ -387,7 +386,7 @@ LAYOUTS: Final[dict[type[Any], tuple[MsgType, str]]] = {
     ClockQuery: (MsgType.CLOCK_QUERY, ""),
     FaultReset: (MsgType.FAULT_RESET, "H"),
     ZProbeAway: (MsgType.Z_PROBE_AWAY, "IIH"),
-    ZHome: (MsgType.Z_HOME, "IIIIiH"),
+    ZHome: (MsgType.Z_HOME, "IIIIH"),
     Ack: (MsgType.ACK, "I"),
     Nak: (MsgType.NAK, "IBB"),
     HelloInfo: (MsgType.HELLO_INFO, "BBBBBBI16sHBIiiHH"),

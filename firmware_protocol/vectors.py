@@ -72,8 +72,8 @@ def message_cases() -> list[tuple[str, m.Message]]:
         ("fault_reset_all", m.FaultReset(17, 0xFFFF)),
         # 1.2: lift off the float switch, 0.5 mm at most, at 20 mm/min (G38.4 Z0.5 F20).
         ("z_probe_away_float", m.ZProbeAway(18, 333, 500, InputMask.FLOAT)),
-        # 1.3: home Z at 20 mm/s, re-seek at 2 mm/s, back off 3 mm, switch at Z 102 mm.
-        ("z_home", m.ZHome(19, 20_000, 2_000, 3_000, 150_000, 102_000, 15_000)),
+        # 1.3: home Z at 20 mm/s, re-seek at 2 mm/s, back off 2 mm, 150 mm at most, in 15 s.
+        ("z_home", m.ZHome(19, 20_000, 2_000, 2_000, 150_000, 15_000)),
         ("ack", m.Ack(4, _BOOT_ID)),
         ("nak_fault_latched", m.Nak(4, _BOOT_ID, NakCode.FAULT_LATCHED, FaultCode.LEASE_EXPIRED)),
         ("nak_out_of_range", m.Nak(3, _BOOT_ID, NakCode.OUT_OF_RANGE, 0)),

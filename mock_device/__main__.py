@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import os
 import sys
 from collections.abc import Sequence
@@ -34,6 +35,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1, help="random seed (plant, noise, boot id)")
     p.add_argument("--serial", default="MOCK-0001", help="board serial in HELLO_INFO")
     p.add_argument("--no-xy-speed", action="store_true", help="board without XY speed input")
+    p.add_argument(
+        "--boot-z-mm",
+        type=float,
+        help="the Z the board takes at power-on, as a real board's firmware constant (60 on "
+        "the reference firmware), wherever the plant's Z stands: Z is right only once homed "
+        "(default: the board knows where Z stands)",
+    )
     p.add_argument(
         "--firmware-variant", choices=sorted(VARIANTS), default="good",
         help="a firmware with one deliberate fault (for conformance tests)",
@@ -86,10 +94,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         stall_acks_at_s=args.stall_acks_at,
         stall_for_s=args.stall_for,
     )
-    identity = BoardIdentity(serial=args.serial)
+    identity = BoardIdentity(serial=args.serial, boot_z_mm=args.boot_z_mm)
     if args.no_xy_speed:
-        identity = BoardIdentity(
-            serial=args.serial, capabilities=identity.capabilities & ~Capability.XY_SPEED
+        identity = dataclasses.replace(
+            identity, capabilities=identity.capabilities & ~Capability.XY_SPEED
         )
     board = SimulatedBoard(
         args.scenario, args.seed, identity=identity, faults=plan,

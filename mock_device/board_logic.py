@@ -37,6 +37,7 @@ PROBE_AWAY_MINOR = 2  # the protocol minor that brought Z_PROBE_AWAY (1.2)
 # Host frames that are commands (executed once per seq); the rest are queries or streamed.
 _NOT_COMMANDS = (fp.Hello, fp.Query, fp.ClockQuery, fp.ZVelocity)
 _Z_LIMIT_BITS = int(InputMask.Z_LIMIT_MIN | InputMask.Z_LIMIT_MAX)
+_Z_LIMIT_MAX = int(InputMask.Z_LIMIT_MAX)
 _ALWAYS_SENT = frozenset({MsgType.SAMPLES, MsgType.EVENT, MsgType.FAULT})
 # A message type no protocol version defines: what an older board's codec makes of a newer
 # message (NAK UNKNOWN_TYPE).
@@ -93,8 +94,13 @@ class BoardIdentity:
         | fp.Capability.ESTOP
         | fp.Capability.Z_LIMITS
         | fp.Capability.FILTERS
+        | fp.Capability.HOMING
     )
     max_feed_um_s: int = 60_000
+    # The Z the firmware takes at power-on, until it homes (a build constant on a real
+    # board: its Z count starts there wherever the carriage stands). None: where the
+    # plant's Z stands, a board that never needs homing to be right.
+    boot_z_mm: float | None = None
 
 
 def _um(mm: float) -> int:
@@ -128,18 +134,23 @@ class BoardLogic:
         self.reset_reason = reset_reason
         z = plant.zaxis
         self._step_mm = z.step_mm
-        self._boot_mm = z.position_mm  # no homing: the board takes Z where it stands
+        # Where the plant's Z stands at power-on (the step count's origin), and the Z the
+        # board takes for it until it homes (BoardIdentity.boot_z_mm).
+        self._boot_mm = z.position_mm
+        boot_z_mm = self.identity.boot_z_mm
+        board_boot_mm = z.position_mm if boot_z_mm is None else boot_z_mm
         self.c = CBoard(self.build)
         self.c.init(
             serial=self.identity.serial,
             capabilities=self.identity.capabilities,
             z_min_um=_um(z.min_mm),
             z_max_um=_um(z.max_mm),
-            z_boot_um=_um(z.position_mm),
+            z_boot_um=_um(board_boot_mm),
             z_max_speed_um_s=min(self.identity.max_feed_um_s, _um(z.max_velocity_mm_s)),
             z_accel_um_s2=_um(z.accel_mm_s2),
             z_steps_per_mm=round(1.0 / z.step_mm),
             reset_reason=reset_reason,
+            z_home_um=_um(z.home_switch_mm),  # homed, the board's Z is the plant's
             entropy=self.rng.getrandbits(32),
         )
         self.hal = self.c.hal
@@ -357,10 +368,14 @@ class BoardLogic:
     def _input_bits(self) -> int:
         """The plant's inputs at the board's pins. Its Z limit switches sit on the soft
         limits, where the board's own soft limits already stop Z (a table's switches sit
-        beyond them): only a switch held by hand (force_input) reaches the board."""
+        beyond them): only a switch held by hand (force_input) reaches the board, and the
+        home switch above the soft limits (Z_LIMIT_MAX), which homing seeks."""
         bits = self.plant.input_bits()
-        forced_on, _ = self.plant.forced_inputs
-        return bits & ~(_Z_LIMIT_BITS & ~forced_on)
+        forced_on, forced_off = self.plant.forced_inputs
+        bits &= ~(_Z_LIMIT_BITS & ~forced_on)
+        if self.plant.zaxis.home_switch and not forced_off & _Z_LIMIT_MAX:
+            bits |= _Z_LIMIT_MAX
+        return bits
 
     def _apply_outputs(self) -> None:
         hal = self.hal

@@ -369,16 +369,15 @@ static inline void dthc_unpack_fault_reset(const uint8_t *p, dthc_fault_reset_t 
  * Payload as Z_PROBE: dthc_z_probe_t and its accessors. */
 #define DTHC_Z_PROBE_AWAY_SIZE 10
 
-/* 0x10 Z_HOME (host to board, 22 bytes, since 1.3):
+/* 0x10 Z_HOME (host to board, 18 bytes, since 1.3):
  * Home Z on its home switch (Z_LIMIT_MAX, up, away from the plate): seek, back off, re-seek
  * slowly, back off (protocol 1.3); HOME_RESULT follows. */
-#define DTHC_Z_HOME_SIZE 22
+#define DTHC_Z_HOME_SIZE 18
 typedef struct {
     uint32_t seek_um_s; /* up to the switch, fast [um/s] */
     uint32_t locate_um_s; /* the slow re-seek that sets the position [um/s] */
     uint32_t backoff_um; /* off the switch before the re-seek, and after [um] */
     uint32_t max_travel_um; /* the seek's longest travel [um] */
-    int32_t home_z_um; /* Z at the switch's trip point [um] */
     uint16_t timeout_ms; /* [ms] */
 } dthc_z_home_t;
 static inline void dthc_z_home_put_seek_um_s(uint8_t *p, uint32_t v) { dthc_put_u32(p, v); }
@@ -395,17 +394,14 @@ static inline uint32_t dthc_z_home_get_max_travel_um(const uint8_t *p)
 {
     return dthc_get_u32(p + 12);
 }
-static inline void dthc_z_home_put_home_z_um(uint8_t *p, int32_t v) { dthc_put_i32(p + 16, v); }
-static inline int32_t dthc_z_home_get_home_z_um(const uint8_t *p) { return dthc_get_i32(p + 16); }
-static inline void dthc_z_home_put_timeout_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 20, v); }
-static inline uint16_t dthc_z_home_get_timeout_ms(const uint8_t *p) { return dthc_get_u16(p + 20); }
+static inline void dthc_z_home_put_timeout_ms(uint8_t *p, uint16_t v) { dthc_put_u16(p + 16, v); }
+static inline uint16_t dthc_z_home_get_timeout_ms(const uint8_t *p) { return dthc_get_u16(p + 16); }
 static inline void dthc_pack_z_home(uint8_t *p, const dthc_z_home_t *m)
 {
     dthc_z_home_put_seek_um_s(p, m->seek_um_s);
     dthc_z_home_put_locate_um_s(p, m->locate_um_s);
     dthc_z_home_put_backoff_um(p, m->backoff_um);
     dthc_z_home_put_max_travel_um(p, m->max_travel_um);
-    dthc_z_home_put_home_z_um(p, m->home_z_um);
     dthc_z_home_put_timeout_ms(p, m->timeout_ms);
 }
 static inline void dthc_unpack_z_home(const uint8_t *p, dthc_z_home_t *m)
@@ -414,7 +410,6 @@ static inline void dthc_unpack_z_home(const uint8_t *p, dthc_z_home_t *m)
     m->locate_um_s = dthc_z_home_get_locate_um_s(p);
     m->backoff_um = dthc_z_home_get_backoff_um(p);
     m->max_travel_um = dthc_z_home_get_max_travel_um(p);
-    m->home_z_um = dthc_z_home_get_home_z_um(p);
     m->timeout_ms = dthc_z_home_get_timeout_ms(p);
 }
 
@@ -1290,7 +1285,6 @@ static inline void dthc_unpack_payload(uint8_t type, const uint8_t *p, size_t le
     F(Z_HOME, z_home, locate_um_s, u) \
     F(Z_HOME, z_home, backoff_um, u) \
     F(Z_HOME, z_home, max_travel_um, u) \
-    F(Z_HOME, z_home, home_z_um, i) \
     F(Z_HOME, z_home, timeout_ms, u) \
     F(ACK, ack, boot_id, u) \
     F(NAK, nak, boot_id, u) \

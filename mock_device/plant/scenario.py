@@ -252,10 +252,13 @@ class ZAxisSpec:
     accel_mm_s2: float = _num(650.0, gt=0.0)
     step_mm: float = _num(0.005, gt=0.0)
     start_mm: float = 60.0
+    home_switch_mm: float | None = None  # the home switch; None: 2 mm above max_mm
 
     def __post_init__(self) -> None:
         if self.max_mm <= self.min_mm:
             raise _FieldError("max_mm", "must be greater than min_mm")
+        if self.home_switch_mm is not None and self.home_switch_mm <= self.max_mm:
+            raise _FieldError("home_switch_mm", "must lie above max_mm (beyond the soft limits)")
         if not self.min_mm <= self.start_mm <= self.max_mm:
             raise _FieldError("start_mm", "must lie within min_mm..max_mm")
 

@@ -33,6 +33,7 @@ class ZAxis:
         "_feed",
         "_jog_v",
         "_stopping",
+        "home_switch_mm",
         "max_mm",
         "max_velocity_mm_s",
         "min_mm",
@@ -52,6 +53,7 @@ class ZAxis:
         accel_mm_s2: float = 650.0,
         step_mm: float = 0.005,
         position_mm: float = 60.0,
+        home_switch_mm: float | None = None,
     ) -> None:
         if max_mm <= min_mm:
             raise ValueError("max_mm must be greater than min_mm")
@@ -64,6 +66,8 @@ class ZAxis:
         self.step_mm = step_mm
         self._eps = step_mm * 0.5
         self.position_mm = min(max(position_mm, min_mm), max_mm)
+        # The home switch sits above the soft limits, as a table's does (2 mm by default).
+        self.home_switch_mm = max_mm + 2.0 if home_switch_mm is None else home_switch_mm
         self.velocity_mm_s = 0.0
         self.target_mm = self.position_mm
         self.state = ZState.IDLE
@@ -81,6 +85,7 @@ class ZAxis:
             accel_mm_s2=spec.accel_mm_s2,
             step_mm=spec.step_mm,
             position_mm=spec.start_mm,
+            home_switch_mm=spec.home_switch_mm,
         )
 
     @property
@@ -106,6 +111,11 @@ class ZAxis:
         if pos >= self.max_mm - self._eps and self.velocity_mm_s >= 0.0:
             return "max"
         return None
+
+    @property
+    def home_switch(self) -> bool:
+        """The home switch (the Z_LIMIT_MAX input): closed at and above ``home_switch_mm``."""
+        return self.position_mm >= self.home_switch_mm - self._eps
 
     def move_to(self, target_mm: float, feed_mm_s: float) -> None:
         """Position to ``target_mm`` (clamped to the soft limits) at up to ``feed_mm_s``."""

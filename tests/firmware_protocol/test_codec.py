@@ -117,7 +117,7 @@ def test_layout_sizes_match_the_spec_tables() -> None:
         fp.MsgType.Z_PROBE: 10, fp.MsgType.Z_VELOCITY: 8, fp.MsgType.Z_STOP: 0,
         fp.MsgType.SET_CURRENT: 2, fp.MsgType.CONFIGURE: 16, fp.MsgType.QUERY: 1,
         fp.MsgType.CLOCK_QUERY: 0, fp.MsgType.FAULT_RESET: 2, fp.MsgType.Z_PROBE_AWAY: 10,
-        fp.MsgType.Z_HOME: 22, fp.MsgType.ACK: 4,
+        fp.MsgType.Z_HOME: 18, fp.MsgType.ACK: 4,
         fp.MsgType.NAK: 6, fp.MsgType.HELLO_INFO: 45, fp.MsgType.SAMPLES: 19,
         fp.MsgType.EVENT: 16, fp.MsgType.FAULT: 16, fp.MsgType.MOTION_DONE: 9,
         fp.MsgType.PROBE_RESULT: 15, fp.MsgType.STATUS: 35, fp.MsgType.CLOCK: 8,
