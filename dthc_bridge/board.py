@@ -29,6 +29,8 @@ __all__ = [
     "BoardClient",
     "BoardReport",
     "FaultReport",
+    "HomeEnded",
+    "HomingPlan",
     "InputChange",
     "MoveEnded",
     "ProbeEnded",
@@ -116,12 +118,51 @@ class ProbeEnded:
     stop_z_mm: float
 
 
+@dataclass(frozen=True, slots=True)
+class HomingPlan:
+    """When and how the daemon homes Z (the daemon's [board.homing]): ``off``, ``at_start``
+    (each time the board comes online unhomed) or ``required`` (and no cut until homed)."""
+
+    mode: str = "off"
+    seek_mm_s: float = 20.0
+    locate_mm_s: float = 2.0
+    backoff_mm: float = 2.0
+    max_travel_mm: float = 200.0
+    timeout_s: float = 30.0
+
+
+@dataclass(frozen=True, slots=True)
+class HomeEnded:
+    """HOME_RESULT: how a Z homing ended (protocol 1.3)."""
+
+    result: int  # fp.HomeOutcome
+    z_mm: float  # where Z came to rest (on the homed count when homed)
+    shift_mm: float  # how far homing moved the board's Z: 0 when its count was right
+
+    @property
+    def homed(self) -> bool:
+        return self.result == fp.HomeOutcome.HOMED
+
+    @property
+    def outcome(self) -> str:
+        """The outcome's name, as an owner reads it in a log line."""
+        try:
+            return fp.HomeOutcome(self.result).name.lower().replace("_", " ")
+        except ValueError:
+            return f"outcome {self.result}"
+
+
 BoardReport = InputChange | FaultReport
 # A batch (its own board time inside it); a report (likewise).
 BatchListener = Callable[[Batch], None]
 ReportListener = Callable[[BoardReport], None]
 Telemetry = Batch | BoardReport  # what the telemetry() stream yields
-_Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult)
+_Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult, fp.HomeResult)
+_COMPLETION_QUERY = {
+    fp.MotionDone: fp.QueryWhat.MOTION_DONE,
+    fp.ProbeResult: fp.QueryWhat.PROBE_RESULT,
+    fp.HomeResult: fp.QueryWhat.HOME_RESULT,
+}
 
 
 def _report_from_wire(msg: fp.Report, t_s: float) -> BoardReport | None:
@@ -141,6 +182,7 @@ def _probe_ended(msg: fp.ProbeResult) -> ProbeEnded:
 
 
 PROBE_AWAY_MINOR = 2  # Z_PROBE_AWAY came with protocol 1.2
+HOMING_MINOR = 3  # Z_HOME came with protocol 1.3
 
 
 def _um(mm: float) -> int:
@@ -235,7 +277,7 @@ class BoardClient:
             self._queues.remove(queue)
 
     def _on_report(self, msg: fp.Report, _t_s: float) -> None:
-        if isinstance(msg, fp.MotionDone | fp.ProbeResult):
+        if isinstance(msg, fp.MotionDone | fp.ProbeResult | fp.HomeResult):
             key = (type(msg), msg.seq)
             waiter = self._waiters.pop(key, None)
             if waiter is not None and not waiter.done():
@@ -364,6 +406,42 @@ class BoardClient:
         ack = await session.request(command)
         return ack.seq
 
+    def can_home(self) -> bool:
+        """The board homes Z: protocol 1.3 or later and the HOMING capability."""
+        info = self._session().info
+        return (
+            info is not None
+            and info.proto_minor >= HOMING_MINOR
+            and bool(info.capabilities & fp.Capability.HOMING)
+        )
+
+    async def home(
+        self,
+        *,
+        seek_mm_s: float,
+        locate_mm_s: float,
+        backoff_mm: float,
+        max_travel_mm: float,
+        timeout_s: float,
+    ) -> HomeEnded:
+        """Home Z on the board's home switch (Z_HOME) and wait for its HOME_RESULT; refused
+        with BoardTooOld before anything is sent when the board's protocol predates it."""
+        session = self._session()
+        info = session.info
+        if info is not None and info.proto_minor < HOMING_MINOR:
+            raise BoardTooOld(
+                "Z_HOME", (fp.PROTOCOL_MAJOR, HOMING_MINOR), (info.proto_major, info.proto_minor)
+            )
+        timeout_ms = min(round(timeout_s * 1000), 0xFFFF)
+        ack = await session.request(
+            fp.ZHome(
+                0, _um(seek_mm_s), _um(locate_mm_s), _um(backoff_mm), _um(max_travel_mm),
+                timeout_ms,
+            )
+        )  # fmt: skip
+        msg = await self._wait_report(fp.HomeResult, ack.seq, timeout_ms / 1000 + 2.0)
+        return HomeEnded(msg.result, msg.z_um / 1000, msg.shift_um / 1000)
+
     async def wait_move(self, seq: int, timeout_s: float) -> MoveEnded:
         """Wait for the Z move ``seq`` (``start_move_z``) to end."""
         return _move_ended(await self._wait_report(fp.MotionDone, seq, timeout_s))
@@ -395,7 +473,7 @@ class BoardClient:
         if session.lost in done:
             raise session.lost.result()
         # The completion report may have been lost on the way: if Z has stopped, ask for it.
-        what = fp.QueryWhat.MOTION_DONE if report is fp.MotionDone else fp.QueryWhat.PROBE_RESULT
+        what = _COMPLETION_QUERY[report]
         status = await self.status()
         if not status.status & fp.StatusBit.Z_BUSY:
             queried = await session.request(fp.Query(0, what))

@@ -64,6 +64,20 @@ class _Closed(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+class HomingSettings(_Closed):
+    """Z homing on the board's home switch (protocol 1.3, HOMING): ``at_start`` homes each
+    time the board comes online unhomed (power-on, a reset); ``required`` does the same and
+    refuses cuts while Z is unhomed. Off by default: the firmware cannot tell whether a
+    switch is wired, and a seek with none runs Z into its hard stop for ``max_travel_mm``."""
+
+    mode: Literal["off", "at_start", "required"] = "off"
+    seek_mm_s: float = Field(20.0, gt=0.0, le=200.0, description="up to the switch")
+    locate_mm_s: float = Field(2.0, gt=0.0, le=50.0, description="the slow re-seek")
+    backoff_mm: float = Field(2.0, gt=0.0, le=20.0, description="off the switch, and parked")
+    max_travel_mm: float = Field(200.0, gt=0.0, le=2000.0, description="the seek's limit")
+    timeout_s: float = Field(30.0, gt=0.0, le=65.0)
+
+
 class BoardSettings(_Closed):
     link: str = Field("/dev/dthc0", description="/dev/..., socket://HOST:PORT or usb://VID:PID")
     baudrate: int = Field(921_600, ge=9600, le=12_000_000)
@@ -77,6 +91,7 @@ class BoardSettings(_Closed):
     arc_lost_ms: int = Field(0, ge=0, le=1000, description="board-side arc-lost latch; 0 = off")
     cal_offset: int = 0
     cal_scale: float = Field(0.01, gt=0.0, description="volts per raw count")
+    homing: HomingSettings = HomingSettings()
 
     def timing(self) -> LinkTiming:
         return LinkTiming(

@@ -19,8 +19,13 @@ import structlog
 
 import firmware_protocol as fp
 
-from .board import BoardClient
-from .config import BoardSettings, ControllerConfigs, ControllerSettings, DaemonConfig
+from .board import BoardClient, HomingPlan
+from .config import (
+    BoardSettings,
+    ControllerConfigs,
+    ControllerSettings,
+    DaemonConfig,
+)
 from .consumables import ConsumableLog, default_consumables_file
 from .controller.dialect import Dialect
 from .controller.plasma import PlasmaController, default_material
@@ -75,13 +80,14 @@ def controller_service(
     consumables: ConsumableLog,
     command_timeout_s: float,
     board_setup: Callable[[BoardClient], Awaitable[None]] | None = None,
+    homing: HomingPlan | None = None,
 ) -> ControllerService:
     """The controller service over a board link, as ``[controller]`` says."""
     controller, store = build_controller(settings, configs)
     return ControllerService(
         controller, supervisor, client, board_setup=board_setup,
         command_timeout_s=command_timeout_s, dialect=Dialect(settings.dialect),
-        materials=store, codes=settings.codes, consumables=consumables,
+        materials=store, codes=settings.codes, consumables=consumables, homing=homing,
     )  # fmt: skip
 
 
@@ -125,6 +131,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
     settings = config.controller
     service = controller_service(
         settings, supervisor, client, board_setup=board_setup(config.board),
+        homing=HomingPlan(**config.board.homing.model_dump()),
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
         consumables=ConsumableLog(settings.consumables_file or default_consumables_file()),

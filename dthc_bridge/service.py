@@ -24,7 +24,7 @@ import structlog
 
 import firmware_protocol as fp
 
-from .board import Batch, BoardClient, BoardReport, InputChange
+from .board import Batch, BoardClient, BoardReport, HomingPlan, InputChange
 from .consumables import ConsumableLog
 from .controller import actions as act
 from .controller.commands import Abort, Command, CommandError, CycleStart, ProbeTest, ThcHold
@@ -83,8 +83,10 @@ class ControllerService:
         materials: MaterialStore | None = None,
         codes: Mapping[str, str] | None = None,
         consumables: ConsumableLog | None = None,
+        homing: HomingPlan | None = None,
     ) -> None:
         self.controller = controller
+        self.homing = homing or HomingPlan()
         # Pierces and arc-on time (consumable life), counted from the board's batches.
         self.consumables = consumables or ConsumableLog(None)
         self._pierces_seen = controller.sequence.pierce_count
@@ -580,6 +582,8 @@ class ControllerService:
                 self.sequence.config = with_board_limits(self.sequence.config, *z_range)
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
+            if self.homing.mode != "off":
+                self._spawn(self._home_z(session.initial_status if session else None), "homing")
             status = session.initial_status if session is not None else None
             if status is not None and status.faults:
                 # A fault latched while we were away (the lease ran out during an unplug):
@@ -590,6 +594,53 @@ class ControllerService:
             self.sequence.on_link_down(reason)
             # The torch-off request cannot reach an absent board; the board's lease does it.
             self.pump()
+
+    async def _home_z(self, status: fp.Status | None) -> None:
+        """[board.homing] at_start / required: home Z when the board comes online unhomed
+        (a daemon restart finds it homed and leaves it). Cuts wait while it homes; with
+        ``required`` they are refused until it has homed."""
+        settings, sequence = self.homing, self.sequence
+        required = settings.mode == "required"
+        if not self.client.can_home():
+            sequence.unhomed = (
+                'Z cannot home: [board.homing] mode is "required" but the board has no home '
+                "switch input (HELLO_INFO lacks HOMING, or its protocol predates 1.3)"
+                if required
+                else ""
+            )
+            log.warning("homing_unsupported", mode=settings.mode)
+            return
+        if status is not None and status.status & fp.StatusBit.HOMED:
+            sequence.unhomed = ""
+            log.info("homing_kept", z_mm=status.z_um / 1000)
+            return
+        sequence.unhomed = "Z is homing: the cut waits until it has found its home switch"
+        log.info("homing_started", mode=settings.mode)
+        failure = ""
+        try:
+            ended = await self.client.home(
+                seek_mm_s=settings.seek_mm_s,
+                locate_mm_s=settings.locate_mm_s,
+                backoff_mm=settings.backoff_mm,
+                max_travel_mm=settings.max_travel_mm,
+                timeout_s=settings.timeout_s,
+            )
+        except (TimeoutError, LinkError) as exc:
+            failure = f"Z homing failed: {exc}"
+        else:
+            if ended.homed:
+                log.info("homed", z_mm=ended.z_mm, shift_mm=ended.shift_mm)
+            else:
+                failure = (
+                    f"Z homing failed: {ended.outcome} (the home switch, Z_LIMIT_MAX, within "
+                    f"{settings.max_travel_mm:g} mm and {settings.timeout_s:g} s of "
+                    "[board.homing])"
+                )
+        if failure:
+            log.warning("homing_failed", error=failure)
+        sequence.unhomed = (
+            f'{failure}; [board.homing] mode is "required"' if failure and required else ""
+        )
 
     async def _setup_board(self, setup: Callable[[BoardClient], Awaitable[None]]) -> None:
         try:

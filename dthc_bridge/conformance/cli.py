@@ -38,6 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--interactive", action="store_true",
         help="ask the operator to toggle each input and to press reset (needs a terminal)",
     )  # fmt: skip
+    parser.add_argument(
+        "--home", action="store_true",
+        help="run the homing cycle (z_home_cycle): Z goes up to its home switch, beyond the "
+        "motion window; for a board whose home switch (Z_LIMIT_MAX) is wired",
+    )  # fmt: skip
     m = parser.add_argument_group("motion window (every Z move stays inside it)")
     m.add_argument(
         "--z-window-mm", type=float, default=d.z_window_mm,
@@ -110,6 +115,7 @@ def options_from_args(args: argparse.Namespace) -> ConformanceOptions:
         input_timeout_s=args.input_timeout_s,
         baudrate=args.baudrate,
         only=_only(args.only),
+        home=args.home,
     )
 
 

@@ -102,6 +102,7 @@ class ConformanceOptions:
     # Run only the steps holding these checks (with the handshake and the set-up every
     # step needs); empty: every check. The others are reported skipped.
     only: tuple[str, ...] = ()
+    home: bool = False  # run the homing cycle: Z up to its home switch, beyond the window
 
     def __post_init__(self) -> None:
         _within("--z-window-mm", self.z_window_mm, 1.0, 50.0)

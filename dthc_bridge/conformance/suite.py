@@ -22,6 +22,7 @@ import firmware_protocol as fp
 
 from ..link import LinkError, RequestTimeout
 from ..transport import TransportError, TransportOpener
+from .checks_homing import check_z_home
 from .checks_lease import check_lease_expiry, check_lease_idle_lapse
 from .checks_link import (
     capability_names,
@@ -89,6 +90,9 @@ _STEPS: tuple[_Step, ...] = (
     _Step(("input_events",), check_input_events, _inputs_timeout_s),
     _Step(("lease_expiry",), check_lease_expiry),
     _Step(("lease_idle_lapse",), check_lease_idle_lapse),
+    # After every check that moves Z inside the window: once homed, Z is where the window no
+    # longer says (checks_homing); the reset check after it moves nothing.
+    _Step(("z_home_refusals", "z_home_cycle"), check_z_home, lambda _: CHECK_TIMEOUT_S + 70.0),
     _Step(("boot_id_reset",), check_boot_id_reset, lambda o: CHECK_TIMEOUT_S + 60.0),
 )
 

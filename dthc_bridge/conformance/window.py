@@ -28,6 +28,7 @@ class MotionWindow:
     guard_margin_um: int
     excursions: int = 0
     farthest_out_um: int = 0  # largest distance seen beyond the window
+    suspended: bool = False  # the homing cycle (--home): Z leaves the window on purpose
     _outside: bool = False
 
     @property
@@ -48,6 +49,8 @@ class MotionWindow:
         """A SAMPLES callback that calls ``stop`` once per excursion beyond the window."""
 
         def on_samples(batch: fp.Samples) -> None:
+            if self.suspended:
+                return
             beyond = max(self.low_um - batch.z_um, batch.z_um - self.high_um, 0)
             self.farthest_out_um = max(self.farthest_out_um, beyond)
             if beyond > self.guard_margin_um:

@@ -198,6 +198,9 @@ class CutSequence:
         self.pierce_count = 0
         self.torch_enabled = True  # PlasmaC M62/M64 P3 disable it (hole over-cut)
         self.work_origin_mm: float | None = None  # machine Z of work Z 0 (G92, G10 L20)
+        # Why a torch start is refused until Z is homed ("": it is not), set by the
+        # service: while the board homes, and unhomed when [board.homing] requires it.
+        self.unhomed = ""
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -250,6 +253,7 @@ class CutSequence:
             "state": str(self.state),
             "mode": int(self.mode),
             "plasma_mode": self.plasma_mode,
+            "unhomed": self.unhomed,
             "g200_active": self.g200_active,
             "thc_enabled": self.thc_enabled,
             "target_v": self.target_v,
@@ -444,6 +448,9 @@ class CutSequence:
             return
         if self.busy:
             self._reply(False, f"a cut is already running ({self.state})")
+            return
+        if self.unhomed:
+            self._reply(False, self.unhomed)
             return
         if not self.plasma_mode and not relay:
             self._reply(False, "not in plasma mode: send T112 M6 first")

@@ -59,7 +59,11 @@ class SessionTrace(Protocol):
 
 
 _REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
-_REPORT_REPLY = {fp.QueryWhat.PROBE_RESULT: fp.ProbeResult, fp.QueryWhat.MOTION_DONE: fp.MotionDone}
+_REPORT_REPLY = {
+    fp.QueryWhat.PROBE_RESULT: fp.ProbeResult,
+    fp.QueryWhat.MOTION_DONE: fp.MotionDone,
+    fp.QueryWhat.HOME_RESULT: fp.HomeResult,
+}
 
 
 @dataclass(slots=True)
@@ -400,7 +404,9 @@ class BoardSession:
                 return  # before the handshake's STATUS: history, which STATUS summarises
             if not self._count_event(msg.counter):
                 return  # a FAULT re-report (same counter) or an older report: already handled
-        if not isinstance(msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult):
+        if not isinstance(
+            msg, fp.Event | fp.Fault | fp.MotionDone | fp.ProbeResult | fp.HomeResult
+        ):
             # A host message coming back (an echoing transceiver) or a type this host does
             # not expect here: counted and dropped, never a reason to end the link.
             self.stats.unexpected_frames += 1

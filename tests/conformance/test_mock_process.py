@@ -27,7 +27,9 @@ pytestmark = pytest.mark.slow
 
 # What CI passes: the mock's plate is at 20 mm, so start 5 mm above it. The round-trip
 # limit is relaxed for shared CI machines: these tests prove the suite, not the scheduler.
-MOCK_ARGS = ("--yes", "--start-z-mm", "25", "--feed-mm-s", "50", "--rtt-limit-ms", "100")
+MOCK_ARGS = (
+    "--yes", "--start-z-mm", "25", "--feed-mm-s", "50", "--rtt-limit-ms", "100", "--home",
+)  # fmt: skip
 SUITE_TIMEOUT_S = 45.0
 
 

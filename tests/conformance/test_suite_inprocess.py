@@ -34,7 +34,8 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
     """Without the OHMIC capability the suite still checks duplicates (a Z move resent must
     not move Z again), probes by the float switch and checks the idle lease lapse; all
     pass, the latched lease (no output to switch on without --allow-torch-relay) and the
-    reset (no way to reset) are skipped, and nothing moved outside the window."""
+    reset (no way to reset) are skipped, and nothing moved outside the window. It has no
+    HOMING either: Z_HOME is refused as the protocol says, the homing cycle skipped."""
     sim = RealtimeSimBoard(SimulatedBoard("flat_clean", 11, identity=NO_OHMIC))
     options = ConformanceOptions(link="sim://conf-no-ohmic", start_z_mm=25.0, feed_mm_s=50.0,
                                  rtt_limit_ms=100.0, telemetry_s=1.0, rtt_queries=50)  # fmt: skip
@@ -43,7 +44,7 @@ async def test_board_without_ohmic_sensing_is_checked_by_moves_and_the_float_swi
     checks = {c.name: c for c in report.checks}
     assert list(checks) == list(CHECK_NAMES)
     verdicts = {name: c.passed for name, c in checks.items()}
-    skips = {"lease_expiry": None, "boot_id_reset": None}
+    skips = {"lease_expiry": None, "boot_id_reset": None, "z_home_cycle": None}
     assert verdicts == {**dict.fromkeys(CHECK_NAMES, True), **skips}, [
         (c.name, c.figure) for c in report.checks if c.passed is not True
     ]

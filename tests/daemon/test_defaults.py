@@ -108,6 +108,7 @@ SECTIONS = {
         renamed={"ack_timeout_ms": ("ack_timeout_s", lambda ms: ms / 1000.0)},
         config_only={
             "link": "the installation's board URL; no pure default",
+            "homing": "the [board.homing] section: the service's HomingPlan (checked below)",
             "baudrate": "a LinkSupervisor argument (checked below)",
             "sample_rate_hz": "BoardClient.configure, protocol default (checked below)",
             "batch_size": "BoardClient.configure, protocol default (checked below)",
@@ -271,3 +272,12 @@ async def test_default_controller_configs_are_what_the_daemon_runs() -> None:
     assert service.sequence.thc.config == thc
     assert service.sequence.mode is mode
     assert supervisor.timing == DaemonConfig().board.timing() == LinkTiming()
+
+
+def test_the_homing_section_defaults_are_the_services() -> None:
+    """[board.homing] as shipped is the HomingPlan the service runs without one: off."""
+    from dthc_bridge.board import HomingPlan
+    from dthc_bridge.config import HomingSettings
+
+    assert HomingPlan(**HomingSettings().model_dump()) == HomingPlan()
+    assert HomingPlan().mode == "off"
