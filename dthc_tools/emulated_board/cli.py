@@ -50,6 +50,7 @@ MODEL_OPTIONS: tuple[tuple[str, str], ...] = (
     ("transfer-max-mm", "the pilot transfers at most this high (default 8)"),
     ("lose-above-mm", "a transferred arc is lost above this height (default 10)"),
     ("pilot-timeout-ms", "a pilot that never transfers ends after this (default 3000)"),
+    ("home-switch-mm", "the home switch (Z_LIMIT_MAX) closes at and above this Z (default 102)"),
 )
 # The voltage-to-frequency card's nominal scaling (--arc-input vtof): (name, help).
 VTOF_OPTIONS: tuple[tuple[str, str], ...] = (

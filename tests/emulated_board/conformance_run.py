@@ -20,14 +20,19 @@ def run_conformance(board: EmulatedBoard, only: Sequence[str] = ()) -> dict[str,
     extra = ["--only", ",".join(only)] if only else []
     done = subprocess.run(
         [sys.executable, "-m", "dthc_bridge.conformance", str(board.pty), "--yes",
-         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json", *extra],
+         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json", "--home",
+         *extra],
         capture_output=True, text=True, timeout=120, check=False,
     )  # fmt: skip
     report: dict[str, Any] = json.loads(done.stdout)
+    # The Nano's build has no home switch input: its homing cycle is skipped, by design.
+    homes = "HOMING" in str(report["board"]["capabilities"])
     failed = [
         f"{c['name']}: {c['figure']}"
         for c in report["checks"]
-        if not c["passed"] and (not only or c["name"] in only)
+        if not c["passed"]
+        and (not only or c["name"] in only)
+        and not (c["name"] == "z_home_cycle" and c["passed"] is None and not homes)
     ]
     assert not failed, failed
     if not only:

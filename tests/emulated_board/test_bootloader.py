@@ -126,11 +126,13 @@ def test_avrdude_flashes_through_the_bootloader_and_the_flashed_firmware_conform
         assert loud == []
         assert handshake_ms < HANDSHAKE_LIMIT_MS
         report = run_conformance(board)
-    assert [c["name"] for c in report["checks"] if c["passed"]] == list(CHECK_NAMES)
+    # The Nano's build has no home switch input: all but the homing cycle (skipped).
+    expected = [n for n in CHECK_NAMES if mcu == "atmega2560" or n != "z_home_cycle"]
+    assert [c["name"] for c in report["checks"] if c["passed"]] == expected
     assert options.record is not None
     resets = [e for e in read_record(options.record) if e.event == "reboot"]
     # avrdude's open, the daemon's, the suite's (and its reset check's SIGUSR2)
     assert sum(e.fields[:1] == ("auto_reset",) for e in resets) >= 3
     print(json.dumps({"mcu": mcu, "avrdude_s": round(flash_s, 2),
                       "open_to_hello_info_ms": round(handshake_ms),
-                      "conformance": f"{len(CHECK_NAMES)}/{len(CHECK_NAMES)}"}))  # fmt: skip
+                      "conformance": f"{len(expected)}/{len(CHECK_NAMES)}"}))  # fmt: skip

@@ -653,6 +653,7 @@ void board_apply_inputs(struct emu *e, int force_all)
 	model[IN_ARC_OK] = e->arc.state == ARC_TRANSFERRED;
 	model[IN_FLOAT] = z <= surface - e->p.float_travel_mm + 1e-9;
 	model[IN_OHMIC] = z <= surface + 1e-9 && e->ohmic_en_level;
+	model[IN_Z_LIMIT_MAX] = z >= e->p.home_switch_mm - 1e-9; /* the home switch */
 	uint8_t mask[12] = {0}, value[12] = {0};
 	for (int i = 0; i < IN_COUNT; i++) {
 		if (!e->in_present[i])

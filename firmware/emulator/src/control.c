@@ -5,7 +5,8 @@
  *
  *   set INPUT 1|0|auto     force an input active / inactive, or give it back to the model
  *                          (arc_ok ohmic float breakaway thc_up thc_down estop z_limit_min
- *                          z_limit_max; auto = the model: inactive for the switches)
+ *                          z_limit_max; auto = the model: z_limit_max is the home switch
+ *                          at home-switch-mm, z_limit_min never active)
  *   plate MM               the plate's height
  *   warp A_MM PERIOD_S     the plate's warp under the moving torch (0 0: flat)
  *   model KEY VALUE        any model option by its command-line name (noise-v, cut-v, ...)
@@ -47,6 +48,7 @@ static const struct model_key model_keys[] = {
 	MK("lose-above-mm", lose_above_mm),
 	MK("pilot-timeout-ms", pilot_timeout_ms),
 	MK("float-travel-mm", float_travel_mm),
+	MK("home-switch-mm", home_switch_mm),
 };
 
 static int parse_double(const char *s, double *out)

@@ -73,6 +73,7 @@ struct model_params {
 	double lose_above_mm;
 	double pilot_timeout_ms;
 	double float_travel_mm;
+	double home_switch_mm; /* Z_LIMIT_MAX closes at and above it (the home switch) */
 };
 
 #define VTOF_NOISE_HOLD_US 104 /* a fresh noise draw as often as the ADC converts */

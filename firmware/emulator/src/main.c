@@ -65,7 +65,7 @@ enum {
 	OPT_WARP_PERIOD, OPT_SLOPE, OPT_CUT_V, OPT_CUT_H, OPT_NOISE, OPT_ARC_OK_DELAY,
 	OPT_FLOAT_TRAVEL, OPT_OCV, OPT_TRANSFER_MAX, OPT_LOSE_ABOVE, OPT_PILOT_TIMEOUT, OPT_HELP,
 	OPT_SPEED, OPT_ARC_INPUT, OPT_VTOF_ZERO, OPT_VTOF_FULL, OPT_VTOF_FULL_V, OPT_BOOTLOADER,
-	OPT_FLASH,
+	OPT_FLASH, OPT_HOME_SWITCH,
 };
 
 static const struct option long_opts[] = {
@@ -89,6 +89,7 @@ static const struct option long_opts[] = {
 	{"transfer-max-mm", required_argument, 0, OPT_TRANSFER_MAX},
 	{"lose-above-mm", required_argument, 0, OPT_LOSE_ABOVE},
 	{"pilot-timeout-ms", required_argument, 0, OPT_PILOT_TIMEOUT},
+	{"home-switch-mm", required_argument, 0, OPT_HOME_SWITCH},
 	{"speed", required_argument, 0, OPT_SPEED},
 	{"arc-input", required_argument, 0, OPT_ARC_INPUT},
 	{"vtof-zero-hz", required_argument, 0, OPT_VTOF_ZERO},
@@ -128,6 +129,7 @@ static int parse_args(struct emu *e, int argc, char **argv)
 		.lose_above_mm = 10.0,
 		.pilot_timeout_ms = 3000.0,
 		.float_travel_mm = 1.5,
+		.home_switch_mm = 102.0, /* the reference firmware's DTHC_Z_HOME_UM */
 	};
 	e->mcu = "atmega2560";
 	e->seed = 1;
@@ -187,6 +189,7 @@ static int parse_args(struct emu *e, int argc, char **argv)
 		case OPT_TRANSFER_MAX: name = "transfer-max-mm"; target = &p->transfer_max_mm; break;
 		case OPT_LOSE_ABOVE: name = "lose-above-mm"; target = &p->lose_above_mm; break;
 		case OPT_PILOT_TIMEOUT: name = "pilot-timeout-ms"; target = &p->pilot_timeout_ms; break;
+		case OPT_HOME_SWITCH: name = "home-switch-mm"; target = &p->home_switch_mm; break;
 		default: usage(stderr); return -1;
 		}
 		if (number(name, optarg, target))
