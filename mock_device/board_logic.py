@@ -50,9 +50,12 @@ class ZAxisPort(Protocol):
     max_mm: float
     max_velocity_mm_s: float
     step_mm: float
+    home_switch_mm: float
 
     @property
     def accel_mm_s2(self) -> float: ...
+    @property
+    def home_switch(self) -> bool: ...
     def drive(self, position_mm: float, velocity_mm_s: float) -> None: ...
 
 
