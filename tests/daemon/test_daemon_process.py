@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import signal
 import time
 import uuid
@@ -15,7 +16,7 @@ import pytest
 from tests.mqtt.conftest import Broker
 from tests.mqtt.helpers import Probe, open_probe, unique_base
 
-from .conftest import STARTUP_S, Daemon, MockBoard, daemon_config
+from .conftest import STARTUP_S, Daemon, MockBoard, daemon_config, wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -213,3 +214,33 @@ async def test_a_daemon_stalled_while_idle_is_not_a_fault_to_rearm(stack: Stack)
     await asyncio.sleep(0.5)
     refused = await stack.gcode("M3")
     assert "re-arm required after: board fault: LEASE_EXPIRED" in refused["error"], refused
+
+
+async def test_a_daemon_told_to_home_homes_a_board_that_booted_wrong_then_cuts(
+    tmp_path: Path, own_broker: Broker
+) -> None:
+    """[board.homing] mode = "required", a board whose firmware took Z as 45 mm at power-on
+    with the carriage at 60: the daemon homes it once online (its log says how far homing
+    moved Z: +15 mm) and the cut that follows starts."""
+    mock = MockBoard(tmp_path, "--boot-z-mm", "45")
+    base = unique_base()
+    config = daemon_config(mock.pty, own_broker, base) + (
+        '\n[board.homing]\nmode = "required"\nseek_mm_s = 40.0\nlocate_mm_s = 4.0\n'
+    )
+    daemon = Daemon(tmp_path, config)
+    try:
+        async with open_probe(own_broker, f"{base}/t1/#") as probe:
+            stack = Stack(daemon, mock, probe, base)
+            await stack.online()
+            homed = await asyncio.to_thread(
+                wait_until, lambda: '"event": "homed"' in daemon.output(), 20.0
+            )
+            assert homed, daemon.output()[-3000:]
+            line = next(x for x in daemon.output().splitlines() if '"event": "homed"' in x)
+            assert json.loads(line)["shift_mm"] == pytest.approx(15.0, abs=0.01)
+            await start_cut(stack)
+            await stack.gcode("M5")
+    finally:
+        daemon.close()
+        mock.proc.kill()
+        mock.proc.communicate(timeout=5)
