@@ -11,8 +11,11 @@ from typing import Final
 
 __all__ = [
     "ARC_INPUTS",
+    "BOOTLOADER_AVRDUDE",
+    "BOOTLOADER_HEX",
     "INSTALL_HINT",
     "MCUS",
+    "MCU_BOOTLOADERS",
     "BuildError",
     "EmulatedBoardError",
     "ToolsMissing",
@@ -92,32 +95,52 @@ def firmware_hex(root: Path, mcu: str, arc_input: str = "adc") -> Path:
     return firmware_elf(root, mcu, arc_input).with_suffix(".hex")
 
 
-# Arduino's own bootloaders as Debian's arduino-core-avr ships them (loaded from there at
-# run time, never copied): the Mega 2560's stk500v2 (avrdude -c wiring, 115200 baud) and
-# the old-bootloader Nano's ATmegaBOOT (avrdude -c arduino, 57600 baud). Not the Uno/new
-# Nano's optiboot: Debian's build of optiboot_atmega328.hex (arduino-core-avr
-# 1.8.7+dfsg-1~deb12u1) is 532 bytes, 20 past the 512-byte boot section it must fit: code
-# at 0x8000-0x8013, beyond the 328P's flash, and the version word at 0x7FFE written over
-# an instruction.
+# Arduino's own bootloaders from Debian's arduino-core-avr (loaded from /usr/share at run
+# time, never copied): the Mega 2560's stk500v2 (avrdude -c wiring, 115200 baud), the Uno's
+# and new Nano's optiboot (-c arduino, 115200) and the old Nano's ATmegaBOOT (-c arduino,
+# 57600). Optiboot is built from Debian's own source of it (firmware/emulator/Makefile):
+# Debian's prebuilt optiboot_atmega328.hex (arduino-core-avr 1.8.7+dfsg-1~deb12u1) is 532
+# bytes, 20 past the 512-byte boot section it must fit (code at 0x8000-0x8013, beyond the
+# 328P's flash); built without its start-up LED flashes it is 496.
 ARDUINO_BOOTLOADERS: Final = Path("/usr/share/arduino/hardware/arduino/avr/bootloaders")
+OPTIBOOT_BUILT: Final = Path("firmware/emulator/build/optiboot_atmega328.hex")  # in the checkout
 BOOTLOADER_HEX: Final = {
-    "atmega2560": ARDUINO_BOOTLOADERS / "stk500v2" / "stk500boot_v2_mega2560.hex",
-    "atmega328p": ARDUINO_BOOTLOADERS / "atmega" / "ATmegaBOOT_168_atmega328.hex",
+    "stk500v2": ARDUINO_BOOTLOADERS / "stk500v2" / "stk500boot_v2_mega2560.hex",
+    "optiboot": OPTIBOOT_BUILT,
+    "atmegaboot": ARDUINO_BOOTLOADERS / "atmega" / "ATmegaBOOT_168_atmega328.hex",
+}
+# Each MCU's bootloaders, the one an Arduino of today ships with first.
+MCU_BOOTLOADERS: Final = {
+    "atmega2560": ("stk500v2",),
+    "atmega328p": ("optiboot", "atmegaboot"),
 }
 # avrdude's programmer and baud rate for each: as firmware/README.md tells owners.
 BOOTLOADER_AVRDUDE: Final = {
-    "atmega2560": ("wiring", 115_200),
-    "atmega328p": ("arduino", 57_600),
+    "stk500v2": ("wiring", 115_200),
+    "optiboot": ("arduino", 115_200),
+    "atmegaboot": ("arduino", 57_600),
 }
 BOOTLOADER_INSTALL_HINT: Final = "sudo apt-get install arduino-core-avr avrdude"
 
 
-def arduino_bootloader(mcu: str) -> Path:
-    """Arduino's bootloader HEX for ``mcu`` from Debian's arduino-core-avr (EmulatedBoardError
-    naming the package when it is not installed)."""
-    path = BOOTLOADER_HEX.get(mcu)
-    if path is None:
+def arduino_bootloader(mcu: str, kind: str | None = None) -> Path:
+    """Arduino's bootloader HEX for ``mcu`` (``kind``: one of MCU_BOOTLOADERS[mcu], the
+    first by default) from Debian's arduino-core-avr (EmulatedBoardError naming the package
+    when it is not installed, or the make target when optiboot is not built)."""
+    kinds = MCU_BOOTLOADERS.get(mcu, ())
+    if not kinds:
         raise EmulatedBoardError(f"no Arduino bootloader known for {mcu}")
+    kind = kind or kinds[0]
+    if kind not in kinds:
+        raise EmulatedBoardError(f"{mcu} has no {kind} bootloader (it has {', '.join(kinds)})")
+    path = BOOTLOADER_HEX[kind]
+    if not path.is_absolute():
+        path = checkout_root() / path
+        if not path.is_file():
+            raise EmulatedBoardError(
+                f"{path} is not built: make -C firmware/emulator optiboot "
+                f"(needs {BOOTLOADER_INSTALL_HINT.split(' install ')[-1]})"
+            )
     if not path.is_file():
         raise EmulatedBoardError(f"{path} is missing: {BOOTLOADER_INSTALL_HINT}")
     return path
@@ -167,7 +190,7 @@ def ensure_built(root: Path, *, firmware: bool = True) -> None:
     missing = missing_tools()
     if missing:
         raise ToolsMissing(missing)
-    _make(root / "firmware" / "emulator", "host", "selftest")
+    _make(root / "firmware" / "emulator", "all")  # host, self-tests, optiboot if its source is here
     if firmware:
         if not (root / "firmware" / "Makefile").is_file():
             raise EmulatedBoardError(f"no firmware/Makefile under {root}: the firmware is missing")

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from .build import (
     ARC_INPUTS,
+    BOOTLOADER_HEX,
     INSTALL_HINT,
     MCUS,
     EmulatedBoardError,
@@ -74,10 +75,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--bootloader",
-        action="store_true",
+        nargs="?",
+        const="",
+        choices=("", *BOOTLOADER_HEX),
+        metavar="KIND",
         help="Arduino's own bootloader at the top of flash (Debian's arduino-core-avr), as a "
         "board off the shelf: every reset starts it, opening the port resets the MCU; the "
-        "application from --flash, or erased (flash it with avrdude through the pty)",
+        "application from --flash, or erased (flash it with avrdude through the pty). KIND: "
+        "stk500v2 (the Mega's), optiboot (the Uno's and new Nano's, the Nano's default) or "
+        "atmegaboot (the old Nano's)",
     )
     p.add_argument(
         "--flash", type=Path, metavar="HEX", help="with --bootloader: the application's HEX"
@@ -103,9 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.flash is not None and not args.bootloader:
+    if args.flash is not None and args.bootloader is None:
         parser.error("--flash needs --bootloader")
-    if args.bootloader and (args.elf is not None or args.selftest):
+    if args.bootloader is not None and (args.elf is not None or args.selftest):
         parser.error("--bootloader runs what is flashed (--flash HEX, or nothing): not --elf")
     try:
         root = checkout_root()
@@ -117,7 +123,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             elf = firmware_elf(root, args.mcu, args.arc_input)
         if not args.no_build:
             ensure_built(root, firmware=args.elf is None and not args.selftest)
-        bootloader = arduino_bootloader(args.mcu) if args.bootloader else None
+        bootloader = (
+            None
+            if args.bootloader is None
+            else arduino_bootloader(args.mcu, args.bootloader or None)
+        )
     except ToolsMissing as exc:
         print(
             f"dthc-emulated-board: build tools missing: {', '.join(exc.missing)}\n"

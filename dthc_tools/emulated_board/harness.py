@@ -84,6 +84,7 @@ class HarnessOptions:
     # ``flash`` (Intel HEX, as avrdude leaves it), or is erased (None: a board as its
     # bootloader was burned); ``elf`` is not loaded (it still names the symbols for peek).
     bootloader: bool = False
+    bootloader_kind: str | None = None  # one of build.MCU_BOOTLOADERS[mcu]; None: the first
     flash: Path | None = None
 
 
@@ -148,7 +149,7 @@ class EmulatedBoard:
         root = checkout_root()
         argv = [str(host_binary(root)), "--mcu", o.mcu, "--pty", str(self.pty)]
         if o.bootloader:
-            argv += ["--bootloader", str(arduino_bootloader(o.mcu))]
+            argv += ["--bootloader", str(arduino_bootloader(o.mcu, o.bootloader_kind))]
             if o.flash is not None:
                 argv += ["--flash", str(o.flash)]
         else:

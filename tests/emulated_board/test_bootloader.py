@@ -34,7 +34,7 @@ from dthc_tools.emulated_board import (
     ensure_built,
     read_record,
 )
-from dthc_tools.emulated_board.build import BOOTLOADER_AVRDUDE
+from dthc_tools.emulated_board.build import BOOTLOADER_AVRDUDE, MCU_BOOTLOADERS
 
 from .conformance_run import run_conformance
 
@@ -45,10 +45,10 @@ FLASH_TIMEOUT_S = 60.0
 HANDSHAKE_LIMIT_MS = 2500.0  # the boot window (under 1.5 s) and a loaded machine's slack
 
 
-def readme_avrdude(root: Path, mcu: str) -> list[str]:
-    """firmware/README.md's avrdude command for ``mcu`` through its bootloader (the
-    programmer and baud rate of BOOTLOADER_AVRDUDE), as words."""
-    programmer, baud = BOOTLOADER_AVRDUDE[mcu]
+def readme_avrdude(root: Path, mcu: str, kind: str) -> list[str]:
+    """firmware/README.md's avrdude command for ``mcu`` through its ``kind`` of bootloader
+    (the programmer and baud rate of BOOTLOADER_AVRDUDE), as words."""
+    programmer, baud = BOOTLOADER_AVRDUDE[kind]
     text = (root / "firmware" / "README.md").read_text()
     commands = re.sub(r"\\\n\s*", " ", text).splitlines()
     for line in commands:
@@ -90,16 +90,17 @@ async def daemon_handshake(port: Path) -> tuple[float, list[MutableMapping[str, 
 def tools() -> None:
     if shutil.which("avrdude") is None:
         pytest.skip("avrdude is not installed (apt-get install avrdude)")
-    for mcu in BOOTLOADER_AVRDUDE:
-        try:
-            arduino_bootloader(mcu)
-        except EmulatedBoardError as exc:
-            pytest.skip(str(exc))
+    for mcu, kinds in MCU_BOOTLOADERS.items():
+        for kind in kinds:
+            try:
+                arduino_bootloader(mcu, kind)
+            except EmulatedBoardError as exc:
+                pytest.skip(str(exc))
 
 
-@pytest.mark.parametrize("mcu", ["atmega2560", "atmega328p"])
+@pytest.mark.parametrize(("mcu", "kind"), [("atmega2560", "stk500v2"), ("atmega328p", "optiboot")])
 def test_avrdude_flashes_through_the_bootloader_and_the_flashed_firmware_conforms(
-    built: Path, tmp_path: Path, mcu: str, tools: None
+    built: Path, tmp_path: Path, mcu: str, kind: str, tools: None
 ) -> None:
     """An erased board with Arduino's bootloader: README's avrdude command flashes and
     verifies the firmware's HEX over the pty; then the daemon's handshake, through the
@@ -108,11 +109,11 @@ def test_avrdude_flashes_through_the_bootloader_and_the_flashed_firmware_conform
     check through the bootloader too)."""
     ensure_built(built, firmware=True)
     options = HarnessOptions(
-        mcu=mcu, bootloader=True, record=tmp_path / "record.csv", build=False,
-        stderr=tmp_path / "host.log",
+        mcu=mcu, bootloader=True, bootloader_kind=kind, record=tmp_path / "record.csv",
+        build=False, stderr=tmp_path / "host.log",
     )  # fmt: skip
     with EmulatedBoard(tmp_path / "board.pty", options) as board:
-        command = with_port(readme_avrdude(built, mcu), board.pty)
+        command = with_port(readme_avrdude(built, mcu, kind), board.pty)
         started_s = time.monotonic()
         done = subprocess.run(
             command, cwd=built, capture_output=True, text=True, timeout=FLASH_TIMEOUT_S,
@@ -133,6 +134,34 @@ def test_avrdude_flashes_through_the_bootloader_and_the_flashed_firmware_conform
     resets = [e for e in read_record(options.record) if e.event == "reboot"]
     # avrdude's open, the daemon's, the suite's (and its reset check's SIGUSR2)
     assert sum(e.fields[:1] == ("auto_reset",) for e in resets) >= 3
-    print(json.dumps({"mcu": mcu, "avrdude_s": round(flash_s, 2),
+    print(json.dumps({"mcu": mcu, "bootloader": kind, "avrdude_s": round(flash_s, 2),
                       "open_to_hello_info_ms": round(handshake_ms),
                       "conformance": f"{len(expected)}/{len(CHECK_NAMES)}"}))  # fmt: skip
+
+
+def test_avrdude_flashes_the_old_nano_through_its_atmegaboot(
+    built: Path, tmp_path: Path, tools: None
+) -> None:
+    """The old Nano's bootloader (ATmegaBOOT, most clones): README's 57600-baud command
+    writes and verifies the firmware's HEX, and the flashed firmware answers the daemon's
+    handshake (the whole suite runs on the optiboot Nano above: the same HEX)."""
+    ensure_built(built, firmware=True)
+    options = HarnessOptions(
+        mcu="atmega328p", bootloader=True, bootloader_kind="atmegaboot", build=False,
+        stderr=tmp_path / "host.log",
+    )  # fmt: skip
+    with EmulatedBoard(tmp_path / "board.pty", options) as board:
+        command = with_port(readme_avrdude(built, "atmega328p", "atmegaboot"), board.pty)
+        started_s = time.monotonic()
+        done = subprocess.run(
+            command, cwd=built, capture_output=True, text=True, timeout=FLASH_TIMEOUT_S,
+            check=False,
+        )  # fmt: skip
+        flash_s = time.monotonic() - started_s
+        assert done.returncode == 0, done.stderr
+        assert "bytes of flash verified" in done.stderr, done.stderr
+        handshake_ms, _ = asyncio.run(daemon_handshake(board.pty))
+        assert handshake_ms < HANDSHAKE_LIMIT_MS
+    print(json.dumps({"mcu": "atmega328p", "bootloader": "atmegaboot",
+                      "avrdude_s": round(flash_s, 2),
+                      "open_to_hello_info_ms": round(handshake_ms)}))  # fmt: skip

@@ -78,16 +78,21 @@ def test_bootloader_runs_arduinos_bootloader_with_the_flashed_hex(
     calls: list[list[str]] = []
     monkeypatch.setattr(cli, "ensure_built", lambda root, firmware: None)
     monkeypatch.setattr(os, "execv", lambda path, argv: calls.append(argv))
-    monkeypatch.setattr(cli, "arduino_bootloader", lambda mcu: Path(f"/boot/{mcu}.hex"))
+    monkeypatch.setattr(
+        cli, "arduino_bootloader", lambda mcu, kind=None: Path(f"/boot/{mcu}-{kind}.hex")
+    )
     pty = str(tmp_path / "board")
     cli.main(["--pty", pty, "--mcu", "atmega328p", "--bootloader", "--flash", "app.hex"])
     (argv,) = calls
     assert "--elf" not in argv
-    assert argv[argv.index("--bootloader") + 1] == "/boot/atmega328p.hex"
+    assert argv[argv.index("--bootloader") + 1] == "/boot/atmega328p-None.hex"
     assert argv[argv.index("--flash") + 1] == "app.hex"
     calls.clear()
     cli.main(["--pty", pty, "--bootloader"])
     assert "--flash" not in calls[0]
+    calls.clear()
+    cli.main(["--pty", pty, "--mcu", "atmega328p", "--bootloader", "atmegaboot"])
+    assert calls[0][calls[0].index("--bootloader") + 1] == "/boot/atmega328p-atmegaboot.hex"
     with pytest.raises(SystemExit):
         cli.main(["--pty", pty, "--flash", "app.hex"])
     assert "--flash needs --bootloader" in capsys.readouterr().err
