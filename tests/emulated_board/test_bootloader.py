@@ -68,6 +68,19 @@ def with_port(words: list[str], port: Path) -> list[str]:
     return [*words[: at + 1], str(port), *words[at + 2 :]]
 
 
+def flash_as_the_readme_says(root: Path, board: EmulatedBoard, mcu: str, kind: str) -> float:
+    """README's avrdude command through the board's ``kind`` of bootloader, on its pty: it
+    must write and verify the HEX. The seconds it took."""
+    command = with_port(readme_avrdude(root, mcu, kind), board.pty)
+    started_s = time.monotonic()
+    done = subprocess.run(
+        command, cwd=root, capture_output=True, text=True, timeout=FLASH_TIMEOUT_S, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert "bytes of flash verified" in done.stderr, done.stderr
+    return time.monotonic() - started_s
+
+
 async def daemon_handshake(port: Path) -> tuple[float, list[MutableMapping[str, Any]]]:
     """The daemon's own session opening ``port`` and shaking hands: milliseconds from the
     open to HELLO_INFO, and what it logged."""
@@ -113,15 +126,7 @@ def test_avrdude_flashes_through_the_bootloader_and_the_flashed_firmware_conform
         build=False, stderr=tmp_path / "host.log",
     )  # fmt: skip
     with EmulatedBoard(tmp_path / "board.pty", options) as board:
-        command = with_port(readme_avrdude(built, mcu, kind), board.pty)
-        started_s = time.monotonic()
-        done = subprocess.run(
-            command, cwd=built, capture_output=True, text=True, timeout=FLASH_TIMEOUT_S,
-            check=False,
-        )  # fmt: skip
-        flash_s = time.monotonic() - started_s
-        assert done.returncode == 0, done.stderr
-        assert "bytes of flash verified" in done.stderr, done.stderr
+        flash_s = flash_as_the_readme_says(built, board, mcu, kind)
         handshake_ms, logs = asyncio.run(daemon_handshake(board.pty))
         loud = [e for e in logs if e.get("log_level") in ("warning", "error", "critical")]
         assert loud == []
@@ -151,15 +156,7 @@ def test_avrdude_flashes_the_old_nano_through_its_atmegaboot(
         stderr=tmp_path / "host.log",
     )  # fmt: skip
     with EmulatedBoard(tmp_path / "board.pty", options) as board:
-        command = with_port(readme_avrdude(built, "atmega328p", "atmegaboot"), board.pty)
-        started_s = time.monotonic()
-        done = subprocess.run(
-            command, cwd=built, capture_output=True, text=True, timeout=FLASH_TIMEOUT_S,
-            check=False,
-        )  # fmt: skip
-        flash_s = time.monotonic() - started_s
-        assert done.returncode == 0, done.stderr
-        assert "bytes of flash verified" in done.stderr, done.stderr
+        flash_s = flash_as_the_readme_says(built, board, "atmega328p", "atmegaboot")
         handshake_ms, _ = asyncio.run(daemon_handshake(board.pty))
         assert handshake_ms < HANDSHAKE_LIMIT_MS
     print(json.dumps({"mcu": "atmega328p", "bootloader": "atmegaboot",
