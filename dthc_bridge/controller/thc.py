@@ -6,7 +6,7 @@ about the open controllers (docs/plasma-facts.md):
 - **Noise**: each batch goes through a median-of-three (kills the 1-2 sample spikes of
   high-frequency start; where it is further than ``spike_v`` from the median of five, a
   two-sample spike, the median of five) and a first-order low-pass; a small dead band
-  (0.3 V, a third of the usual 1 V) is enough after that, so the height is held tighter.
+  (0.15 V, a sixth of the usual 1 V) is enough after that, so the height is held tighter.
   In a noise burst (the mean |second difference| of those samples above ``noise_ref_v``,
   rising within ``noise_attack_s``) the loop's command is scaled down by the square of
   the ratio, and no slow-down target is measured.
@@ -69,8 +69,8 @@ class Lock(StrEnum):
 @dataclass(frozen=True)
 class ThcConfig:
     kp_per_s: float = 14.0  # Z mm/s per mm of height error (≈ 1.9 mm/s per volt at 7.5 V/mm)
-    ki_per_s2: float = 40.0
-    deadband_v: float = 0.3
+    ki_per_s2: float = 60.0
+    deadband_v: float = 0.15
     lowpass_hz: float = 40.0
     spike_v: float = 5.0  # median of three this far from the median of five: a spike
     # Noise bursts: the loop gain is scaled by (noise_ref_v / noise)^2 above noise_ref_v,

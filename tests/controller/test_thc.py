@@ -34,9 +34,18 @@ def step(thc: ThcController, volts: float, t: float, speed: float = 100.0) -> fl
 
 
 def test_inside_the_dead_band_z_holds() -> None:
-    """Errors within 0.3 V give no Z motion at all."""
-    thc = running()
+    """Errors within the dead band (here 0.3 V; 0.15 V by default) give no Z motion at all."""
+    thc = running(deadband_v=0.3)
     assert all(step(thc, 120.2, 0.005 * i) == 0.0 for i in range(1, 50))
+
+
+def test_by_default_a_fifth_of_a_volt_is_corrected() -> None:
+    """The default dead band is 0.15 V (0.02 mm): 0.2 V low moves Z up, 0.1 V does not."""
+    assert ThcConfig().deadband_v == 0.15
+    thc = running()
+    assert max(step(thc, 119.8, 0.005 * i) for i in range(1, 50)) > 0.0
+    thc = running()
+    assert all(step(thc, 119.9, 0.005 * i) == 0.0 for i in range(1, 50))
 
 
 def test_low_voltage_moves_up_and_high_voltage_moves_down() -> None:
