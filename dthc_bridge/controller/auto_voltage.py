@@ -52,6 +52,10 @@ class AutoVoltage:
     times_s: list[float] = field(default_factory=list)
     held_v: list[float] = field(default_factory=list)  # the held voltage as it came
     since: float | None = None  # the window's start
+    # Time since the window's start without a voltage (a noise burst left out): the windows
+    # count the time with voltages, so a burst does not fill them with nothing.
+    gap_s: float = 0.0
+    last_s: float | None = None  # the previous batch's time
     mean_v: float | None = None  # the estimate before the fit refined it
     refined: bool = False
 
@@ -64,12 +68,15 @@ class AutoVoltage:
             for samples in (self.volts, self.distances_mm, self.times_s, self.held_v):
                 samples.clear()
             self.since = None
+            self.gap_s = 0.0
+            self.last_s = now
             return None
         if self.since is None:
             self.since = now
+        self._count(now, filtered_v)
         if filtered_v is not None:
             self._keep(now, filtered_v, distance_mm)
-        if now - self.since >= self.window_s and self.volts:
+        if self._covered_s(now) >= self.window_s and self.volts:
             self.mean_v = sum(self.volts) / len(self.volts)
             return self.mean_v
         return None
@@ -87,13 +94,25 @@ class AutoVoltage:
         if self.limits is None or self.since is None or self.mean_v is None:
             self.refined = True
             return None
+        self._count(now, held_v)  # a void lock's batches count (a kerf, not a gap)
         if held_v is not None and not void:
             self._keep(now, held_v, distance_mm)
-        if now - self.since < self.fit_window_s:
+        if self._covered_s(now) < self.fit_window_s:
             return None
         self.refined = True
         line = line_fit(self.distances_mm, self.volts, self.limits)
         return self._through_transient(self.limits, line) or (None if line is None else line[0])
+
+    def _count(self, now: float, held_v: float | None) -> None:
+        """The time since the previous batch is a gap when this batch has no voltage."""
+        if held_v is None and self.last_s is not None and self.since is not None:
+            self.gap_s += now - max(self.last_s, self.since)
+        self.last_s = now
+
+    def _covered_s(self, now: float) -> float:
+        """Time since the window's start with voltages."""
+        assert self.since is not None
+        return now - self.since - self.gap_s
 
     def _keep(self, now: float, held_v: float, distance_mm: float) -> None:
         self.times_s.append(now)
@@ -151,9 +170,9 @@ def line_fit(
 ) -> tuple[float, float] | None:
     """The voltage at distance 0 by a least-squares line through (distance, volts), or None
     where the line is implausible: fewer than 3 samples, too short a span, too steep a
-    plate, halves that disagree (a start transient still decaying, a bend in the plate),
-    too much scatter. ``(voltage, slope)``: a slope of 0 where the mean is returned (a
-    slope not told from noise)."""
+    plate, too much scatter, halves that disagree (a start transient still decaying, a bend
+    in the plate) about a slope told from noise. ``(voltage, slope)``: a slope of 0 where
+    the mean is returned (a slope not told from noise)."""
     n = len(volts)
     if n < 3:
         return None
@@ -166,20 +185,22 @@ def line_fit(
     b = _slope(distances_mm, volts)
     if b is None or abs(b) > limits.max_plate_slope_v_per_mm:
         return None
-    half = n // 2
-    b1 = _slope(distances_mm[:half], volts[:half])
-    b2 = _slope(distances_mm[half:], volts[half:])
-    if b1 is None or b2 is None or abs(b1 - b2) > limits.max_slope_change_v_per_mm:
-        return None
     a = mean_v - b * mean_d
     residual = math.sqrt(sum((v - a - b * d) ** 2 for d, v in pairs) / n)
     if residual > limits.max_residual_v:
         return None
     # No slope to tell from noise (a flat plate): the mean, a few times less noisy than
-    # the line's value at distance 0.
+    # the line's value at distance 0. Judged before the halves: on a flat plate halves
+    # that disagree are noise, or what is left of a start transient, and the whole
+    # window's mean holds less of either than the first window's.
     slope_error = residual * math.sqrt(n / max(1, n - 2) / sdd)
     if abs(b) < max(limits.min_slope_t * slope_error, limits.min_slope_v_per_mm):
         return mean_v, 0.0
+    half = n // 2
+    b1 = _slope(distances_mm[:half], volts[:half])
+    b2 = _slope(distances_mm[half:], volts[half:])
+    if b1 is None or b2 is None or abs(b1 - b2) > limits.max_slope_change_v_per_mm:
+        return None
     return a, b
 
 

@@ -6,7 +6,7 @@ about the open controllers (docs/plasma-facts.md):
 - **Noise**: each batch goes through a median-of-three (kills the 1-2 sample spikes of
   high-frequency start; where it is further than ``spike_v`` from the median of five, a
   two-sample spike, the median of five) and a first-order low-pass; a small dead band
-  (0.3 V, a third of the usual 1 V) is enough after that, so the height is held tighter.
+  (0.15 V, a sixth of the usual 1 V) is enough after that, so the height is held tighter.
   In a noise burst (the mean |second difference| of those samples above ``noise_ref_v``,
   rising within ``noise_attack_s``) the loop's command is scaled down by the square of
   the ratio, and no slow-down target is measured.
@@ -69,8 +69,8 @@ class Lock(StrEnum):
 @dataclass(frozen=True)
 class ThcConfig:
     kp_per_s: float = 14.0  # Z mm/s per mm of height error (≈ 1.9 mm/s per volt at 7.5 V/mm)
-    ki_per_s2: float = 40.0
-    deadband_v: float = 0.3
+    ki_per_s2: float = 60.0
+    deadband_v: float = 0.15
     lowpass_hz: float = 40.0
     spike_v: float = 5.0  # median of three this far from the median of five: a spike
     # Noise bursts: the loop gain is scaled by (noise_ref_v / noise)^2 above noise_ref_v,
@@ -120,6 +120,11 @@ class ThcConfig:
     # plate it predicts. 0: Z holds until the slow target is measured.
     slow_settle_feedforward: float = 1.0
     slow_settle_min_mm_s: float = 0.3  # a slower Z at full feed is noise: no prediction
+    # A plate Z did not follow at full feed (|mean Z speed| below slow_flat_mm_s) is flat:
+    # the slow target's own noise (a 40 ms window) is then the likelier error, and while
+    # following Z acts only outside this wider dead band. 0: the cut's dead band.
+    slow_flat_mm_s: float = 0.2
+    slow_flat_deadband_v: float = 1.5
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -163,6 +168,7 @@ class _State:
     held_travel_mm: float = 0.0  # Z travel on the prediction while held
     full_speed_integral_mm_s: float = 0.0  # the integral to restore at speed
     slow_travel_mm: float = 0.0  # Z travel while following, summed over the cut
+    slow_flat: bool = False  # the slow target was set on a flat plate (slow_flat_mm_s)
 
 
 _DELAY_ONLY = frozenset({Lock.FROZEN})
@@ -332,10 +338,13 @@ class ThcController:
             s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
             error_v = target_v - v_f  # positive: voltage low, torch too close
-            if abs(error_v) <= cfg.deadband_v:
+            deadband = cfg.deadband_v
+            if s.slow_target_v is not None and s.slow_flat:
+                deadband = max(deadband, cfg.slow_flat_deadband_v)
+            if abs(error_v) <= deadband:
                 error_v = 0.0
             else:
-                error_v -= cfg.deadband_v if error_v > 0 else -cfg.deadband_v
+                error_v -= deadband if error_v > 0 else -deadband
             error_mm = error_v / cfg.slope_v_per_mm
             gain = 1.0
             if s.noise_v > cfg.noise_ref_v > 0.0:
@@ -501,6 +510,8 @@ class ThcController:
         plate_mm = cfg.slow_plate_feedforward * s.at_speed_velocity_mm_s * held_s
         plate_v = (plate_mm - s.held_travel_mm) * cfg.slope_v_per_mm
         s.slow_target_v = max(measured - s.at_speed_error_v + plate_v, self.target_v)
+        s.slow_flat = abs(s.at_speed_velocity_mm_s) < cfg.slow_flat_mm_s
         s.full_speed_integral_mm_s = s.integral_mm_s
-        # The integral is the Z speed that followed the plate at full feed: scale it.
-        s.integral_mm_s *= s.speed_ratio
+        # The integral is the Z speed that followed the plate at full feed: scale it (a
+        # flat plate's is noise: none).
+        s.integral_mm_s *= 0.0 if s.slow_flat and cfg.slow_flat_deadband_v > 0.0 else s.speed_ratio

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from dthc_bridge.controller.auto_voltage import AutoVoltage, FitLimits, fitted_voltage
+from dthc_bridge.controller.auto_voltage import AutoVoltage, FitLimits, fitted_voltage, line_fit
 
 LIMITS = FitLimits(
     max_plate_slope_v_per_mm=0.02 * 7.5,
@@ -69,3 +69,44 @@ def test_implausible_lines_give_no_fit() -> None:
     assert fitted_voltage(distances, [120.0 - 0.01 * d for d in distances], LIMITS) == (
         pytest.approx(120.0)
     )
+
+
+def test_a_noise_burst_does_not_fill_the_window() -> None:
+    """Batches a noise burst leaves out (no voltage) do not count towards the window: after
+    a burst of 0.5 s, the mean waits for 50 ms of voltages, not one batch."""
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=LIMITS)
+    assert auto.sample(1.0, 121.0, 0.0, void=False) is None
+    for i in range(1, 51):
+        assert auto.sample(1.0 + 0.01 * i, None, 0.0, void=False) is None
+    for i in range(1, 5):
+        assert auto.sample(1.5 + 0.01 * i, 120.0, 0.0, void=False) is None
+    assert auto.sample(1.55, 120.0, 0.0, void=False) == pytest.approx(120.1667, abs=1e-3)
+    # The fit window counts the same way: 0.3 s of voltages from the window's start.
+    t = 1.55
+    while auto.wants_refining:
+        t += 0.01
+        auto.refine(t, 120.0, 100.0 * (t - 1.5), void=False)
+    assert t == pytest.approx(1.8, abs=0.011)
+
+
+def test_halves_that_disagree_about_a_slope_not_told_from_noise_give_the_mean() -> None:
+    """A flat plate whose first samples still carry 2 V of a decaying start and +-0.4 V of
+    noise: the halves' slopes differ by more than max_slope_change, but the whole line's
+    slope is not told from noise: the mean of every sample (less of the start's remnant
+    than the first window's), not None."""
+    limits = FitLimits(
+        max_plate_slope_v_per_mm=0.15,
+        min_span_mm=1.0,
+        max_residual_v=1.0,
+        max_slope_change_v_per_mm=0.05,
+        min_slope_t=2.0,
+        min_slope_v_per_mm=0.025,
+    )
+    distances = [float(i) for i in range(40)]
+    volts = [
+        120.0 + (2.0 * (1 - i / 4) if i < 4 else 0.0) + (0.4 if i % 2 else -0.4) for i in range(40)
+    ]
+    fit = line_fit(distances, volts, limits)
+    assert fit is not None
+    assert fit[0] == pytest.approx(120.125)
+    assert fit[1] == 0.0

@@ -34,9 +34,18 @@ def step(thc: ThcController, volts: float, t: float, speed: float = 100.0) -> fl
 
 
 def test_inside_the_dead_band_z_holds() -> None:
-    """Errors within 0.3 V give no Z motion at all."""
-    thc = running()
+    """Errors within the dead band (here 0.3 V; 0.15 V by default) give no Z motion at all."""
+    thc = running(deadband_v=0.3)
     assert all(step(thc, 120.2, 0.005 * i) == 0.0 for i in range(1, 50))
+
+
+def test_by_default_a_fifth_of_a_volt_is_corrected() -> None:
+    """The default dead band is 0.15 V (0.02 mm): 0.2 V low moves Z up, 0.1 V does not."""
+    assert ThcConfig().deadband_v == 0.15
+    thc = running()
+    assert max(step(thc, 119.8, 0.005 * i) for i in range(1, 50)) > 0.0
+    thc = running()
+    assert all(step(thc, 119.9, 0.005 * i) == 0.0 for i in range(1, 50))
 
 
 def test_low_voltage_moves_up_and_high_voltage_moves_down() -> None:
@@ -313,6 +322,41 @@ def test_following_ends_at_once_when_the_thc_may_not_move(how: str) -> None:
     assert thc.locks(t)
     assert velocities[-1] == 0.0
     assert all(abs(b) <= abs(a) for a, b in itertools.pairwise(velocities))
+
+
+def _flat_or_rising_slow_down(plate_mm_s: float, **cfg: Any) -> list[float]:
+    """A plate rising ``plate_mm_s`` at full feed under a torch the loop follows, then a
+    half-speed slow-down (a 5 V rise) whose target is measured; the voltage then reads 1 V
+    low at that speed. Z velocities after that 1 V step."""
+    thc = running(**cfg)
+    z = plate = t = 0.0
+    dt = 0.005
+    after: list[float] = []
+    for i in range(800):
+        speed = 100.0 if i < 400 else 50.0
+        if i < 400:
+            plate += plate_mm_s * dt
+        volts = 120.0 + 7.5 * (z - plate) + (5.0 if speed < 100.0 else 0.0)
+        if thc.slow_target_v is not None:
+            volts -= 1.0
+        t += dt
+        velocity = step(thc, volts, t, speed=speed)
+        z += velocity * dt
+        if thc.slow_target_v is not None:
+            after.append(velocity)
+    assert after, "the slow-down was never followed"
+    return after
+
+
+def test_on_a_flat_plate_a_slow_down_target_error_within_its_noise_does_not_move_z() -> None:
+    """Z did not move at full feed (a flat plate): the slow target's own noise is the
+    likelier error, so while following Z acts only outside slow_flat_deadband_v (1.5 V)
+    and the full-feed integral (noise) is not carried over. A plate that Z followed at
+    full feed (2 mm/s) keeps the cut's dead band: the 1 V is followed."""
+    flat = _flat_or_rising_slow_down(0.0)
+    assert flat == [0.0] * len(flat)
+    assert max(_flat_or_rising_slow_down(0.0, slow_flat_deadband_v=0.0)) > 0.3
+    assert max(_flat_or_rising_slow_down(2.0)) > 0.3
 
 
 def test_slow_follow_off_holds_z_through_the_whole_slow_down() -> None:
