@@ -639,7 +639,10 @@ class ControllerService:
         if failure:
             log.warning("homing_failed", error=failure)
         sequence.unhomed = (
-            f'{failure}; [board.homing] mode is "required"' if failure and required else ""
+            f'{failure}; [board.homing] mode is "required": no cut until Z has homed (mend '
+            "the switch, then restart the service: it homes again)"
+            if failure and required
+            else ""
         )
 
     async def _setup_board(self, setup: Callable[[BoardClient], Awaitable[None]]) -> None:
