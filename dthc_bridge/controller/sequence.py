@@ -185,6 +185,9 @@ class CutSequence:
         self._timer: float | None = None
         self._debouncer = InputDebouncer()
         self._z_mm = math.nan
+        # Z at the ohmic input's last raw change (the board's input-change event carries Z
+        # at that moment): a creep up's release point, a debounce before it is confirmed.
+        self._ohmic_changed_z_mm = math.nan
         self._requested_mm_s: float | None = None
         self._xy_speed_mm_s: float | None = None
         self._last_thc_t: float | None = None
@@ -732,6 +735,9 @@ class CutSequence:
         """Raw input snapshot (from SAMPLES and EVENTs); debounced here."""
         self.now = now
         self._z_mm = z_mm
+        if bits & InputMask.OHMIC != self._debouncer.raw & InputMask.OHMIC:
+            # Where the contact changed, not where its debounce ended (the zero's Z).
+            self._ohmic_changed_z_mm = z_mm
         self._on_edges(self._debouncer.feed(bits, now, self.config.input_debounce_s))
 
     def _on_edges(self, edges: list[Edge]) -> None:
@@ -915,7 +921,12 @@ class CutSequence:
         assert self.cut is not None
         cfg = self.config
         if self._probe.sensor_ohmic:
-            self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
+            # Where the contact opened: by the time its debounce confirms it, the creep has
+            # taken the torch a debounce's travel (and a batch's) higher, 0.005-0.01 mm at
+            # 1 mm/s, which every cut's height (and a target measured there) would keep.
+            released = self._ohmic_changed_z_mm
+            z = released if not math.isnan(released) else self._z_mm
+            self.cut.zero_mm = z + cfg.ohmic_offset_mm
         else:
             # The float switch closes at its travel but opens lower (hysteresis): the zero
             # comes from where it closed, latched by the board on the way down; the creep
