@@ -40,7 +40,8 @@ about the open controllers (docs/plasma-facts.md):
   releases once the voltage is back near its level before the rise, or after a quiet
   period (``void_lock.VoidLockDetector``). Noise bursts and spikes do not lock.
 - **Operator pause**: ``held`` locks until the program resumes (or the next cut starts).
-- **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
+- **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``);
+  after the delay it hands over what is left of the transient (``transient_v``).
 While locked, Z holds (velocity 0) and the integral is frozen, never wound up.
 """
 
@@ -180,6 +181,11 @@ class ThcController:
     def __init__(self, config: ThcConfig | None = None) -> None:
         self.config = config or ThcConfig()
         self.target_v: float | None = None
+        # What the arc still carries on top of the cut's voltage for now, set by the sequence
+        # each batch: the start transient's remnant, as the pierce and the THC delay's
+        # voltages show it (start_transient.py). The loop holds target_v plus this, so a
+        # decaying overshoot after the delay does not take the torch down (and back up).
+        self.transient_v = 0.0
         self.enabled = True
         self.frozen = True
         self.held = False  # operator pause: Z holds until released or the next cut
@@ -210,6 +216,7 @@ class ThcController:
         """A new cut: forget filters, integral and locks; the sequence sets the target."""
         self._s = self._new_state()
         self.target_v = None
+        self.transient_v = 0.0
         self.frozen = True
         self.held = False
         self.rise_only = False
@@ -330,11 +337,12 @@ class ThcController:
         error_mm = 0.0
         command = 0.0
         predicting = False  # moving Z on the plate predicted while a slow-down settles
-        target_v = self.target_v if s.slow_target_v is None else s.slow_target_v
-        if self.target_v is not None and not locks and s.slow_target_v is None:
+        cut_target_v = None if self.target_v is None else self.target_v + self.transient_v
+        target_v = cut_target_v if s.slow_target_v is None else s.slow_target_v
+        if cut_target_v is not None and not locks and s.slow_target_v is None:
             # Averaged over about 0.1 s: one noisy sample must not set the next slow target.
             a = min(1.0, dt_s / cfg.slow_error_average_s)
-            s.at_speed_error_v += a * (v_f - self.target_v - s.at_speed_error_v)
+            s.at_speed_error_v += a * (v_f - cut_target_v - s.at_speed_error_v)
             s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
             error_v = target_v - v_f  # positive: voltage low, torch too close

@@ -622,3 +622,16 @@ def test_a_kerf_spike_void_locks_at_once_and_releases_when_the_voltage_is_back()
     assert sum(v * 0.005 for v, _ in out) > -0.02
     released = len(locked) - 1 - locked[::-1].index(True)  # last locked batch
     assert released * 5 < 25 + 50 + 20  # released within 20 ms of the voltage being back
+
+
+def test_the_start_transients_remnant_is_held_on_top_of_the_target() -> None:
+    """The sequence hands the THC what is left of the start transient (``transient_v``):
+    a voltage that much over the target is the arc's decaying overshoot, not a torch too
+    high, and Z holds; without it the same voltage takes the torch down."""
+    handed = running()
+    handed.transient_v = 0.6
+    plain = running()
+    assert all(step(handed, 120.6, 0.005 * i) == 0.0 for i in range(1, 40))
+    assert min(step(plain, 120.6, 0.005 * i) for i in range(1, 40)) < -0.1
+    handed.reset()
+    assert handed.transient_v == 0.0
