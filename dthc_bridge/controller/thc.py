@@ -9,7 +9,8 @@ about the open controllers (docs/plasma-facts.md):
   (0.15 V, a sixth of the usual 1 V) is enough after that, so the height is held tighter.
   In a noise burst (the mean |second difference| of those samples above ``noise_ref_v``,
   rising within ``noise_attack_s``) the loop's command is scaled down by the square of
-  the ratio, and no slow-down target is measured.
+  the ratio, it acts on the filtered voltage averaged over ``burst_average_s``, and no
+  slow-down target is measured.
 - **Control law**: the voltage error is turned into a height error with the material's
   V/mm slope, and Z velocity = Kp·e + Ki·∫e (PI on height). The integral term follows
   tilted and warped sheets without the steady error a P-only law keeps on a ramp.
@@ -126,6 +127,10 @@ class ThcConfig:
     # following Z acts only outside this wider dead band. 0: the cut's dead band.
     slow_flat_mm_s: float = 0.2
     slow_flat_deadband_v: float = 1.5
+    # In a noise burst the loop acts on the filtered voltage averaged over this time
+    # constant (about a quarter of the noise the 40 Hz low-pass leaves: 2 V of burst noise
+    # then mostly inside the dead band). 0: the filtered voltage, as outside bursts.
+    burst_average_s: float = 0.05
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -141,6 +146,7 @@ class ThcOutput:
 @dataclass
 class _State:
     filtered_v: float | None = None
+    averaged_v: float | None = None  # filtered_v averaged over burst_average_s
     despiked: deque[float] = field(default_factory=lambda: deque(maxlen=3))
     noise_v: float = 0.0
     recent: deque[float] = field(default_factory=lambda: deque(maxlen=5))
@@ -308,6 +314,13 @@ class ThcController:
                     if abs(v - m5) > cfg.spike_v:
                         v = m5
             s.filtered_v = v if s.filtered_v is None else s.filtered_v + alpha * (v - s.filtered_v)
+            if cfg.burst_average_s > 0.0:
+                beta = min(1.0, period_s / cfg.burst_average_s)
+                s.averaged_v = (
+                    s.filtered_v
+                    if s.averaged_v is None
+                    else s.averaged_v + beta * (s.filtered_v - s.averaged_v)
+                )
             d = s.despiked
             d.append(v)
             if len(d) == 3 and cfg.noise_tau_s > 0.0:
@@ -345,7 +358,10 @@ class ThcController:
             s.at_speed_error_v += a * (v_f - cut_target_v - s.at_speed_error_v)
             s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
-            error_v = target_v - v_f  # positive: voltage low, torch too close
+            seen_v = v_f
+            if self.noise_burst and s.averaged_v is not None and cfg.burst_average_s > 0.0:
+                seen_v = s.averaged_v  # a burst: the longer average
+            error_v = target_v - seen_v  # positive: voltage low, torch too close
             deadband = cfg.deadband_v
             if s.slow_target_v is not None and s.slow_flat:
                 deadband = max(deadband, cfg.slow_flat_deadband_v)
