@@ -42,7 +42,7 @@ from .commands import (
 )
 from .debounce import Edge, InputDebouncer
 from .height_window import HeightWindow
-from .start_transient import StartTransient
+from .start_transient import StartTransient, refit_decay
 from .states import HANDLERS, IN_A_CUT, State, StateHandler
 from .thc import Lock, ThcController
 
@@ -105,6 +105,10 @@ class SequenceConfig:
     auto_voltage_max_wait_s: float = 2.0
     auto_voltage_transient_tau_margin: float = 1.5  # the wait uses 1.5 x the fitted tau
     at_speed_settle_s: float = 0.15
+    # Once the THC delay is over the THC holds the target plus what is left of the start
+    # transient, as the pierce and the delay's voltages show it together
+    # (start_transient.refit_decay): a decaying overshoot is the arc's, not a torch too high.
+    thc_discounts_transient: bool = True
     # The THC's height window (controller/height_window.py): the THC never takes the torch
     # more than this far below cut height, nor above it (toward the arc-loss height, 6-8 mm
     # stand-off), by the arc voltage against the voltage measured at cut height; reaching
@@ -137,6 +141,12 @@ class _Cut:
     start_z_mm: float = math.nan  # Z when CUTTING began at cut height (NaN: a relay cut)
     distance_mm: float = 0.0  # XY travel since the cut started (from the probed point)
     relit: bool = False
+    # The start transient's tail during the THC delay (a held torch's voltage), and the
+    # decay fitted through it and the pierce: (overshoot, tau) for the THC, or None.
+    tail_times_s: list[float] = field(default_factory=list)
+    tail_volts: list[float] = field(default_factory=list)
+    tail_fitted: bool = False
+    tail_decay: tuple[float, float] | None = None
     ohmic_failed: int = 0
     relay: bool = False  # the program does the start sequence; M3 is the torch relay
     z_warned: bool = False  # a program Z move was ignored during this cut (warned once)
@@ -185,6 +195,9 @@ class CutSequence:
         self._timer: float | None = None
         self._debouncer = InputDebouncer()
         self._z_mm = math.nan
+        # Z at the ohmic input's last raw change (the board's input-change event carries Z
+        # at that moment): a creep up's release point, a debounce before it is confirmed.
+        self._ohmic_changed_z_mm = math.nan
         self._requested_mm_s: float | None = None
         self._xy_speed_mm_s: float | None = None
         self._last_thc_t: float | None = None
@@ -732,6 +745,9 @@ class CutSequence:
         """Raw input snapshot (from SAMPLES and EVENTs); debounced here."""
         self.now = now
         self._z_mm = z_mm
+        if bits & InputMask.OHMIC != self._debouncer.raw & InputMask.OHMIC:
+            # Where the contact changed, not where its debounce ended (the zero's Z).
+            self._ohmic_changed_z_mm = z_mm
         self._on_edges(self._debouncer.feed(bits, now, self.config.input_debounce_s))
 
     def _on_edges(self, edges: list[Edge]) -> None:
@@ -817,7 +833,12 @@ class CutSequence:
             self.cut.transient.add(now, volts)  # torch and gantry still: the transient alone
         dt = period_s * len(volts) if self._last_thc_t is None else now - self._last_thc_t
         self._last_thc_t = now
+        cutting = self.cut is not None and self.state is State.CUTTING and not self.cut.relay
+        if cutting:
+            self.thc.transient_v = self._transient_left_v(now)
         self._handler.on_batch(self, volts, period_s, dt)
+        if cutting:
+            self._sample_transient_tail(now)
         self.tick(now)
 
     def tick(self, now: float) -> None:
@@ -845,6 +866,57 @@ class CutSequence:
         if cut is None or filtered is None or math.isnan(cut.start_z_mm):
             return filtered
         return filtered - self.thc.config.slope_v_per_mm * (self._z_mm - cut.start_z_mm)
+
+    def _delay_done(self, now: float) -> bool:
+        cut = self.cut
+        assert cut is not None
+        return cut.arc_ok_since is not None and now - cut.arc_ok_since >= self.config.thc_delay_s
+
+    def _sample_transient_tail(self, now: float) -> None:
+        """During the THC delay, at speed, the voltage a held torch reads: the start
+        transient's tail, fitted with the pierce's voltages when the delay ends."""
+        cut = self.cut
+        assert cut is not None
+        if cut.tail_fitted or self._delay_done(now) or not self.config.thc_discounts_transient:
+            return
+        settled = (
+            cut.at_speed_since is not None
+            and now - cut.at_speed_since >= self.config.at_speed_settle_s
+        )
+        held_v = self._held_v()
+        if (
+            not settled
+            or held_v is None
+            or self.thc.noise_burst
+            or self.thc.locks(now) - {Lock.FROZEN}
+        ):
+            return
+        cut.tail_times_s.append(now)
+        cut.tail_volts.append(held_v)
+
+    def _transient_left_v(self, now: float) -> float:
+        """What is left of the start transient, for the THC once its delay is over: by the
+        decay the pierce and the delay's voltages show together, and by the pierce's alone,
+        the smaller (0 without the first)."""
+        cut = self.cut
+        assert cut is not None
+        cfg = self.config
+        if not cfg.thc_discounts_transient or not self._delay_done(now):
+            return 0.0
+        if not cut.tail_fitted:
+            cut.tail_fitted = True
+            fit = refit_decay(cut.transient, cut.tail_times_s, cut.tail_volts)
+            if fit is not None and fit[0] > 0.0 and fit[2] <= cfg.auto_voltage_max_residual_v:
+                cut.tail_decay = (fit[0], fit[1])
+        t0 = cut.transient.t0_s
+        if cut.tail_decay is None or t0 is None:
+            return 0.0
+        overshoot_v, tau_s = cut.tail_decay
+        # The smaller of the two models' remnants: either may overestimate it by half or
+        # more (noise on the tail's curvature), and too much would lift the torch; too
+        # little only leaves some of the transient to the loop, as without a model.
+        tail_v = overshoot_v * math.exp(-(now - t0) / tau_s)
+        return min(tail_v, cut.transient.remnant_v(now))
 
     def _measure_cut_height_v(self, now: float) -> None:
         """One batch of the cut-height voltage's measurement (every cut): the mean first,
@@ -915,7 +987,12 @@ class CutSequence:
         assert self.cut is not None
         cfg = self.config
         if self._probe.sensor_ohmic:
-            self.cut.zero_mm = self._z_mm + cfg.ohmic_offset_mm
+            # Where the contact opened: by the time its debounce confirms it, the creep has
+            # taken the torch a debounce's travel (and a batch's) higher, 0.005-0.01 mm at
+            # 1 mm/s, which every cut's height (and a target measured there) would keep.
+            released = self._ohmic_changed_z_mm
+            z = released if not math.isnan(released) else self._z_mm
+            self.cut.zero_mm = z + cfg.ohmic_offset_mm
         else:
             # The float switch closes at its travel but opens lower (hysteresis): the zero
             # comes from where it closed, latched by the board on the way down; the creep

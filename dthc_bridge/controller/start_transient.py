@@ -21,7 +21,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-__all__ = ["StartTransient", "fit_through_transient"]
+__all__ = ["StartTransient", "fit_through_transient", "refit_decay"]
 
 _MIN_POINTS = 12  # batches: 60 ms at 5 ms per batch
 _TAUS_S = tuple(0.02 * 1.12**k for k in range(41))  # 0.02 s .. about 1.9 s
@@ -159,6 +159,43 @@ def fit_through_transient(
         sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, volts, strict=True)) / n_c
     )
     return coef[1], (coef[2] if with_slope else 0.0), residual
+
+
+def refit_decay(
+    transient: StartTransient, times_s: Sequence[float], volts: Sequence[float]
+) -> tuple[float, float, float] | None:
+    """The decay seen by the pierce and by the cut's first voltages together (a held torch's,
+    ``volts`` at ``times_s``; a flat plate): ``V = A_pierce | A_cut + C·exp(-(t - t0)/tau)``,
+    best ``tau`` on the grid. Returns ``(C, tau, rms residual of the cut's samples)``, or
+    None without a pierce model or enough samples. The pierce alone sees the decay's first
+    0.3 s and leaves ``tau`` uncertain by a factor of two; its tail pins it down."""
+    t0 = transient.t0_s
+    n_p = len(transient.volts)
+    n_c = len(volts)
+    if t0 is None or transient.overshoot_v <= 0.0 or n_p < _MIN_POINTS or n_c < _MIN_POINTS:
+        return None
+    p_in = transient.volts
+    pierce = [p_in[0], *(sorted(p_in[i - 1 : i + 2])[1] for i in range(1, n_p - 1)), p_in[-1]]
+    rows_t = [*transient.times_s, *times_s]
+    ys = [*pierce, *volts]
+    zeros = [0.0] * n_c
+    best: tuple[float, float, list[float]] | None = None  # (sse, tau, coefficients)
+    for tau in _TAUS_S:
+        rows = _design(rows_t, n_p, zeros, t0, tau, with_slope=False)
+        coef = _least_squares(rows, ys)
+        if coef is None:
+            continue
+        sse = sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, ys, strict=True))
+        if best is None or sse < best[0]:
+            best = (sse, tau, coef)
+    if best is None:
+        return None
+    _, tau, coef = best
+    rows = _design(rows_t, n_p, zeros, t0, tau, with_slope=False)[n_p:]
+    residual = math.sqrt(
+        sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, volts, strict=True)) / n_c
+    )
+    return coef[2], tau, residual
 
 
 def _design(

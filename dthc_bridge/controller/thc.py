@@ -9,7 +9,8 @@ about the open controllers (docs/plasma-facts.md):
   (0.15 V, a sixth of the usual 1 V) is enough after that, so the height is held tighter.
   In a noise burst (the mean |second difference| of those samples above ``noise_ref_v``,
   rising within ``noise_attack_s``) the loop's command is scaled down by the square of
-  the ratio, and no slow-down target is measured.
+  the ratio, it acts on the filtered voltage averaged over ``burst_average_s``, and no
+  slow-down target is measured.
 - **Control law**: the voltage error is turned into a height error with the material's
   V/mm slope, and Z velocity = Kp·e + Ki·∫e (PI on height). The integral term follows
   tilted and warped sheets without the steady error a P-only law keeps on a ramp.
@@ -40,7 +41,8 @@ about the open controllers (docs/plasma-facts.md):
   releases once the voltage is back near its level before the rise, or after a quiet
   period (``void_lock.VoidLockDetector``). Noise bursts and spikes do not lock.
 - **Operator pause**: ``held`` locks until the program resumes (or the next cut starts).
-- **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``).
+- **Start transient and arc-lost delay**: the sequence keeps THC frozen (``frozen``);
+  after the delay it hands over what is left of the transient (``transient_v``).
 While locked, Z holds (velocity 0) and the integral is frozen, never wound up.
 """
 
@@ -125,6 +127,10 @@ class ThcConfig:
     # following Z acts only outside this wider dead band. 0: the cut's dead band.
     slow_flat_mm_s: float = 0.2
     slow_flat_deadband_v: float = 1.5
+    # In a noise burst the loop acts on the filtered voltage averaged over this time
+    # constant (about a quarter of the noise the 40 Hz low-pass leaves: 2 V of burst noise
+    # then mostly inside the dead band). 0: the filtered voltage, as outside bursts.
+    burst_average_s: float = 0.05
     integral_limit_mm_s: float = 15.0
     speed_stale_s: float = 0.05
 
@@ -140,6 +146,7 @@ class ThcOutput:
 @dataclass
 class _State:
     filtered_v: float | None = None
+    averaged_v: float | None = None  # filtered_v averaged over burst_average_s
     despiked: deque[float] = field(default_factory=lambda: deque(maxlen=3))
     noise_v: float = 0.0
     recent: deque[float] = field(default_factory=lambda: deque(maxlen=5))
@@ -180,6 +187,11 @@ class ThcController:
     def __init__(self, config: ThcConfig | None = None) -> None:
         self.config = config or ThcConfig()
         self.target_v: float | None = None
+        # What the arc still carries on top of the cut's voltage for now, set by the sequence
+        # each batch: the start transient's remnant, as the pierce and the THC delay's
+        # voltages show it (start_transient.py). The loop holds target_v plus this, so a
+        # decaying overshoot after the delay does not take the torch down (and back up).
+        self.transient_v = 0.0
         self.enabled = True
         self.frozen = True
         self.held = False  # operator pause: Z holds until released or the next cut
@@ -210,6 +222,7 @@ class ThcController:
         """A new cut: forget filters, integral and locks; the sequence sets the target."""
         self._s = self._new_state()
         self.target_v = None
+        self.transient_v = 0.0
         self.frozen = True
         self.held = False
         self.rise_only = False
@@ -301,6 +314,13 @@ class ThcController:
                     if abs(v - m5) > cfg.spike_v:
                         v = m5
             s.filtered_v = v if s.filtered_v is None else s.filtered_v + alpha * (v - s.filtered_v)
+            if cfg.burst_average_s > 0.0:
+                beta = min(1.0, period_s / cfg.burst_average_s)
+                s.averaged_v = (
+                    s.filtered_v
+                    if s.averaged_v is None
+                    else s.averaged_v + beta * (s.filtered_v - s.averaged_v)
+                )
             d = s.despiked
             d.append(v)
             if len(d) == 3 and cfg.noise_tau_s > 0.0:
@@ -330,14 +350,18 @@ class ThcController:
         error_mm = 0.0
         command = 0.0
         predicting = False  # moving Z on the plate predicted while a slow-down settles
-        target_v = self.target_v if s.slow_target_v is None else s.slow_target_v
-        if self.target_v is not None and not locks and s.slow_target_v is None:
+        cut_target_v = None if self.target_v is None else self.target_v + self.transient_v
+        target_v = cut_target_v if s.slow_target_v is None else s.slow_target_v
+        if cut_target_v is not None and not locks and s.slow_target_v is None:
             # Averaged over about 0.1 s: one noisy sample must not set the next slow target.
             a = min(1.0, dt_s / cfg.slow_error_average_s)
-            s.at_speed_error_v += a * (v_f - self.target_v - s.at_speed_error_v)
+            s.at_speed_error_v += a * (v_f - cut_target_v - s.at_speed_error_v)
             s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
-            error_v = target_v - v_f  # positive: voltage low, torch too close
+            seen_v = v_f
+            if self.noise_burst and s.averaged_v is not None and cfg.burst_average_s > 0.0:
+                seen_v = s.averaged_v  # a burst: the longer average
+            error_v = target_v - seen_v  # positive: voltage low, torch too close
             deadband = cfg.deadband_v
             if s.slow_target_v is not None and s.slow_flat:
                 deadband = max(deadband, cfg.slow_flat_deadband_v)

@@ -353,6 +353,37 @@ def test_a_float_switch_probe_sets_the_height_where_the_switch_closed() -> None:
     assert loop.plant.true_height_mm == pytest.approx(1.5, abs=0.03)
 
 
+def test_an_ohmic_zero_is_where_the_contact_opened_not_where_its_debounce_ended() -> None:
+    """Creeping up at 1 mm/s, the ohmic contact opens at 20.005 mm (the board's input-change
+    event carries Z then); its 5 ms debounce is confirmed by a batch with Z at 20.010. The
+    plate is where the contact opened: the zero is 20.005, and the pierce height is over it
+    (a zero a debounce later kept every cut, and a target measured there, 0.005 mm high)."""
+    from dthc_bridge.controller.sequence import CutSequence
+    from firmware_protocol.constants import InputMask
+
+    sequence = CutSequence()
+    sequence.plasma_mode = True
+    sequence.set_params(CutParams(pierce_height_mm=3.8, cut_height_mm=1.5, ohmic=True))
+    sequence.on_inputs(0, 60.0, 0.0)
+    sequence.start(0.0)
+    assert str(sequence.state) == "to_probe_height"
+    sequence.on_motion_done(sequence._move_token, True, 25.0)
+    assert str(sequence.state) == "probing"
+    ohmic = int(InputMask.OHMIC)
+    sequence.on_inputs(ohmic, 20.0, 1.0)
+    sequence.on_probe_done(True, True, 20.0, 19.98)
+    assert str(sequence.state) == "creep_up"
+    sequence.on_inputs(ohmic, 19.995, 1.015)
+    sequence.on_inputs(0, 20.005, 1.027)  # the contact opens (an input-change event)
+    assert str(sequence.state) == "creep_up"  # not yet debounced
+    sequence.on_inputs(0, 20.010, 1.035)  # the next batch: the release is confirmed
+    assert str(sequence.state) == "to_pierce_height"
+    assert sequence.cut is not None
+    assert sequence.cut.zero_mm == pytest.approx(20.005)
+    moves = [a for a in sequence.drain() if isinstance(a, act.MoveZ)]
+    assert moves[-1].target_mm == pytest.approx(20.005 + 3.8)
+
+
 def test_puddle_jump_answers_m3_early_and_then_lowers_to_cut_height() -> None:
     """With a puddle jump, XY may start at the puddle height; Z then goes to cut height."""
     loop = ready(config=SequenceConfig(puddle_height_percent=150.0, puddle_delay_s=0.2))
