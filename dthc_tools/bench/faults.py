@@ -18,7 +18,7 @@ shipped unit's ``Restart=on-failure`` does) or stopped 0.5 s and 2 s, the board 
 1 s or rebooted, the broker restarted or unreachable for 10 s, the sender killed, both
 cores pinned by other processes, a burst of corrupt bytes on the link, 1 % frame loss for
 10 s. Phases: idle, probing, arc wait, pierce delay, cutting (THC active), THC locked (the
-operator's THC hold), between cuts.
+operator's THC switch off mid-cut), between cuts.
 
 ``--board atmega2560`` runs the same matrix with the reference firmware's ELF on the
 emulated Mega (``dthc-emulated-board``, simavr) in place of the mock, X and Y on the
@@ -232,7 +232,10 @@ async def _phase(cell: Cell, phase: str, timeout_s: float = 60.0) -> None:
         if seen and seen[-1]["state"] == target and (phase != "between_cuts" or cut_done):
             await asyncio.sleep(settle)
             if phase == "thc_locked":
-                await stack.request("thc_hold", on=True)  # the THC locked, the arc on
+                # The THC locked, the arc on: the operator's THC switch off (as M666). Not
+                # thc_hold: the operator's hold is a pause now, ending the cut (invariant 7),
+                # and the sender waits on it for the operator.
+                await stack.request("thc", on=False)
             return
         await asyncio.sleep(0.005)
     raise RuntimeError(f"the program never reached {phase}")
