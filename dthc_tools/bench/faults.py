@@ -214,6 +214,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--faults", help="comma-separated subset of: " + ", ".join(FAULTS))
     parser.add_argument("--phases", help="comma-separated subset of: " + ", ".join(PHASES))
     parser.add_argument(
+        "--keep-dir", type=Path,
+        help="run the cells in this directory and keep it (each cell's logs and, on the "
+        "emulated board, its record): default a temporary one, removed",
+    )  # fmt: skip
+    parser.add_argument(
         "--board", choices=BOARDS, default="mock",
         help="mock: the mock board (default); atmega2560: the reference firmware on the "
         "emulated Mega (simavr), X and Y on the emulated grbl",
@@ -354,14 +359,21 @@ async def _cell(fault: str, phase: str, workdir: Path, board: str = "mock") -> d
     program = _program_file(workdir)
     report: dict[str, Any] | None = None
     pace: dict[str, Any] | None = None
+    missed: str | None = None  # the phase never came: why (the fault was not struck)
     async with Stack(_stack_options(workdir, board)) as stack:
         cell = Cell(stack)
         with (workdir / "sender.log").open("w") as log:
             if phase != "idle":
                 cell.sender = _start_sender(stack, program, log)
-                await _phase(cell, phase)
+                try:
+                    await _phase(cell, phase)
+                except RuntimeError as exc:
+                    missed = str(exc)
+                    if cell.sender.poll() is None:  # waiting on an operator, say
+                        cell.sender.terminate()
             struck_at = time.monotonic()
-            await FAULTS[fault](cell)
+            if missed is None:
+                await FAULTS[fault](cell)
             cell.fault_end = time.monotonic()
             if phase == "idle":
                 await asyncio.sleep(RECOVERY_GOAL_S + 1.0)  # then the program, as an operator
@@ -412,6 +424,9 @@ async def _cell(fault: str, phase: str, workdir: Path, board: str = "mock") -> d
         if mock["relay_on_at_end"]:
             cell_result["violations"] = {**cell_result["violations"], "relay_on_at_end": 1}
     cell_result["pass"] = cell_holds(cell_result)
+    if missed is not None:  # a failed cell, said as such: the fault never struck
+        cell_result["outcome"] = f"not struck: {missed} ({outcome})"
+        cell_result["pass"] = False
     return cell_result
 
 
@@ -471,15 +486,26 @@ async def _matrix(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
     for i, (fault, phase) in enumerate(plan):
         if not args.json:
             print(f"... {fault} in {phase}", file=sys.stderr, flush=True)
-        cells.append(await _cell(fault, phase, workdir / f"cell{i}", args.board))
+        try:
+            cells.append(await _cell(fault, phase, workdir / f"cell{i}", args.board))
+        except (RuntimeError, OSError, subprocess.SubprocessError) as exc:
+            # The stack itself failed (a board that never came online...): a failed cell
+            # with nothing measured, said as such; the matrix goes on.
+            cells.append({"fault": fault, "phase": phase, "board": args.board, "pass": False,
+                          "outcome": f"cell error: {exc}", "unsafe_torch_ms": None,
+                          "requests_lost": None, "requests_duplicated": None,
+                          "silent_resumes": None, "recovery_s": None})  # fmt: skip
+    measured = [c for c in cells if c["unsafe_torch_ms"] is not None]
     recoveries = [(c["recovery_s"], f"{c['fault']}/{c['phase']}") for c in cells
                   if c["recovery_s"] is not None]  # fmt: skip
     worst = max(recoveries, default=(0.0, ""))
     totals = {
-        "unsafe_torch_ms": sum(c["unsafe_torch_ms"] for c in cells),
-        "requests_lost": sum(c["requests_lost"] for c in cells),
-        "requests_duplicated": sum(c["requests_duplicated"] for c in cells),
-        "silent_resumes": sum(c["silent_resumes"] for c in cells),
+        "unsafe_torch_ms": sum(c["unsafe_torch_ms"] for c in measured),
+        "unsafe_torch_ms_worst": max((c["unsafe_torch_ms"] for c in measured), default=0.0),
+        "requests_lost": sum(c["requests_lost"] for c in measured),
+        "requests_duplicated": sum(c["requests_duplicated"] for c in measured),
+        "silent_resumes": sum(c["silent_resumes"] for c in measured),
+        "cells_unmeasured": len(cells) - len(measured),
         "worst_recovery_s": worst[0], "worst_recovery_cell": worst[1],
         "cells": len(cells), "cells_failed": sum(not c["pass"] for c in cells),
         "board": args.board,
@@ -501,5 +527,9 @@ async def _matrix(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> dict[str, object]:
+    keep: Path | None = getattr(args, "keep_dir", None)
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        return asyncio.run(_matrix(args, keep))
     with tempfile.TemporaryDirectory(prefix="dthc-faults-") as tmp:
         return asyncio.run(_matrix(args, Path(tmp)))
