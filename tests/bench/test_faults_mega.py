@@ -94,6 +94,17 @@ def test_board_truth_reads_the_record_as_the_mock_reports_its_exit(tmp_path: Pat
     assert truth["relay_on_at_end"] is True
 
 
+def test_the_board_serials_are_the_ones_the_daemon_logged_from_hello(tmp_path: Path) -> None:
+    log = tmp_path / "daemon.log"
+    log.write_text(
+        '{"event": "starting"}\n'
+        '{"serial": "DTHC-MEGA-0001", "event": "board_hello"}\n'
+        "not json\n"
+        '{"serial": "DTHC-MEGA-0001", "event": "board_hello"}\n'  # after a reconnect: once
+    )
+    assert faults.board_serials(log) == ["DTHC-MEGA-0001"]
+
+
 class RawPort:
     """The emulated board's pty opened raw, non-blocking."""
 
