@@ -73,7 +73,8 @@ SUITES: dict[str, Suite] = {
         ),
         Suite(
             "faults",
-            "every fault at every phase of a cut: torch-on, lost requests, recovery",
+            "every fault at every phase of a cut (the mock, or --board atmega2560: the firmware "
+            "on the emulated Mega): torch-on, lost requests, recovery",
             faults.add_arguments,
             faults.run,
         ),

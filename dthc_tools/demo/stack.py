@@ -71,6 +71,9 @@ class StackOptions:
     # option names, e.g. {"plate-mm": 20, "warp-mm": 0.5}); its record in board-record.csv.
     board: str = "mock"
     board_model: dict[str, float] = field(default_factory=dict)
+    # False: run the emulated board as built (a caller that ran ``ensure_built`` once, e.g.
+    # the fault matrix, spares each stack the ``make`` of the firmware and its native tests).
+    board_build: bool = True
     # A secured broker of the caller's (users, ACL, TLS), started by the caller: each client
     # of the stack logs in with its role's settings ("daemon", "sender", "panel", and
     # "dashboard" for the stack's own observer). Empty: the stack's own anonymous broker.
@@ -273,6 +276,7 @@ class Stack:
         options = HarnessOptions(
             mcu=self.options.board, record=self.board_record, seed=self.options.seed,
             model=self.options.board_model, stderr=self.workdir / "board.log",
+            build=self.options.board_build,
         )  # fmt: skip
         self.emulated_board = EmulatedBoard(self.pty, options)
         self.emulated_board.start()

@@ -49,11 +49,14 @@ __all__ = [
     "read_record",
     "relay_off_after_last_host_byte_us",
     "reply_delays_us",
+    "torch_on_edges",
+    "unsafe_torch_us",
 ]
 
 READY_TIMEOUT_S: Final = 10.0
 REPLY_TIMEOUT_S: Final = 5.0
 STOP_TIMEOUT_S: Final = 5.0
+INJECT_CHUNK: Final = 240  # bytes per ``inject`` line (the control line holds 511 chars)
 QUERY_TYPE: Final = 0x0C
 STATUS_TYPE: Final = 0x88
 
@@ -249,6 +252,26 @@ class EmulatedBoard:
                 return int(self.command(f"peek {addr} {min(size, 4)}").split()[1])
         raise ControlError(f"no symbol {symbol!r} with a size in {self.elf}")
 
+    def unplug(self) -> None:
+        """The cable pulled: the pty's master closed (the client reads EIO), the --pty link
+        removed; the MCU runs on and what it sends goes nowhere. :meth:`replug` ends it."""
+        self.command("unplug")
+
+    def replug(self) -> None:
+        """A new pty behind the same path, as a port that enumerates again."""
+        self.command("replug")
+
+    def inject(self, data: bytes) -> None:
+        """Bytes into the board's stream to the host, after what the firmware has queued
+        (garbage on the line), in lines of at most ``INJECT_CHUNK`` bytes."""
+        for i in range(0, len(data), INJECT_CHUNK):
+            self.command("inject " + data[i : i + INJECT_CHUNK].hex())
+
+    def drop_frames(self, rate: float, for_s: float) -> None:
+        """Lose each board frame whole with probability ``rate`` for ``for_s`` seconds (the
+        host's frames untouched; the record says ``frame_lost`` for each)."""
+        self.command(f"drop {rate!r} {for_s!r}")
+
     def reboot(self) -> None:
         """SIGUSR2: reset the MCU as its reset pin would; physical Z is kept."""
         self._require().send_signal(signal.SIGUSR2)
@@ -376,3 +399,37 @@ def reply_delays_us(
             end = match.start_us if to_first_byte and match.start_us is not None else match.t_us
             delays.append(end - req.t_us)
     return delays
+
+
+def unsafe_torch_us(events: Iterable[RecordEvent], grace_us: int) -> tuple[int, int]:
+    """Torch-relay time past the lease, from the record alone (simulated µs): the relay pin
+    HIGH more than ``grace_us`` after the last host frame delivered to the UART before that
+    moment. (total µs, episodes): an episode is one stretch of the relay on past its grace.
+    The relay still on at the record's end counts up to its last line."""
+    total = episodes = 0
+    torch_on = False
+    last_frame: int | None = None
+    prev_t: int | None = None
+    late = False
+    for e in events:
+        if torch_on and prev_t is not None:
+            limit = (last_frame + grace_us) if last_frame is not None else prev_t
+            late_us = max(0, e.t_us - max(prev_t, limit))
+            if late_us and not late:
+                episodes += 1
+            late = late or late_us > 0
+            total += late_us
+        prev_t = e.t_us
+        if e.event == "torch":
+            torch_on = e.fields[:1] == ("1",)
+            if not torch_on:
+                late = False
+        elif e.event == "host_frame":
+            last_frame = e.t_us
+            late = False
+    return total, episodes
+
+
+def torch_on_edges(events: Iterable[RecordEvent]) -> int:
+    """The relay pin's rising edges: each torch-on the board carried out."""
+    return sum(1 for e in events if e.event == "torch" and e.fields[:1] == ("1",))

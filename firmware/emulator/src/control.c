@@ -16,8 +16,22 @@
  *                          avr-nm, less 0x800000), little-endian -> "peek VALUE" (decimal)
  *   reboot                 as SIGUSR2: reset the MCU (external reset), Z kept
  *   quit                   exit as on SIGTERM
+ *
+ * Link faults (the fault matrix, `dthc-bridge bench faults --board MCU`):
+ *
+ *   unplug                 the USB cable pulled: the pty's master is closed (its client reads
+ *                          EIO, polls HUP) and the --pty link removed; the board runs on and
+ *                          what it sends goes nowhere
+ *   replug                 a new pty behind the same --pty path (as a re-enumerated port)
+ *   inject HEX             these bytes (at most 240) into the board's stream to the host,
+ *                          after what the firmware has queued: garbage on the line
+ *   drop RATE SECONDS      lose each board frame whole with probability RATE for SECONDS
+ *                          (record.c), the host's frames untouched
  */
+#define _GNU_SOURCE
 #include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
 #include <math.h>
 #include <poll.h>
 #include <stddef.h>
@@ -27,6 +41,15 @@
 #include <unistd.h>
 
 #include "host.h"
+
+/* record.c: frame loss on the board's stream. */
+void record_link_drop(struct emu *e, double rate, double for_s);
+uint64_t record_frames_lost(void);
+
+/* While unplugged: the write end of the pipe whose read end stands in for the pty's master
+ * and slave descriptors (same numbers, so main.c's poll set stays valid: never readable,
+ * reads EAGAIN, writes fail), or -1. */
+static int unplug_hold = -1;
 
 struct model_key {
 	const char *name;
@@ -87,13 +110,104 @@ void control_status(struct emu *e, char *buf, size_t n)
 		snprintf(buf + len, n - (size_t)len,
 			 " rx_bytes=%llu rx_dropped=%llu tx_bytes=%llu tx_dropped=%llu "
 			 "steps_ignored=%llu reboots=%llu max_lag_ms=%.1f arc_input=%s vtof_hz=%.0f "
-			 "vtof_edges=%llu",
+			 "vtof_edges=%llu link=%s frames_lost=%llu",
 			 (unsigned long long)e->rx_bytes, (unsigned long long)e->rx_dropped,
 			 (unsigned long long)e->tx_bytes, (unsigned long long)e->tx_dropped,
 			 (unsigned long long)e->steps_ignored, (unsigned long long)e->reboots,
 			 e->max_lag_s * 1000.0, e->arc_input == ARC_INPUT_VTOF ? "vtof" : "adc",
 			 e->arc_input == ARC_INPUT_VTOF ? e->vtof.hz : 0.0,
-			 (unsigned long long)e->vtof.edges);
+			 (unsigned long long)e->vtof.edges, unplug_hold >= 0 ? "unplugged" : "up",
+			 (unsigned long long)record_frames_lost());
+}
+
+/* Put descriptor `from` at number `to` (same open file, close-on-exec), closing `from`. */
+static int move_fd(int from, int to)
+{
+	if (dup2(from, to) < 0)
+		return -1;
+	close(from);
+	return fcntl(to, F_SETFD, FD_CLOEXEC);
+}
+
+static const char *link_unplug(struct emu *e)
+{
+	if (e->bootloader_path)
+		return "error: unplug: not with --bootloader (the open watch is not re-armed)";
+	if (unplug_hold >= 0)
+		return "error: unplug: already unplugged";
+	int p[2];
+	if (pipe2(p, O_NONBLOCK | O_CLOEXEC) != 0)
+		return "error: unplug: pipe failed";
+	char target[PATH_MAX];
+	ssize_t n = readlink(e->pty_path, target, sizeof target - 1);
+	if (n > 0) {
+		target[n] = 0;
+		if (!strcmp(target, e->pty_name)) /* only our own link */
+			unlink(e->pty_path);
+	}
+	/* The pty's last master descriptor closes here: its client sees the hang-up. */
+	if (dup2(p[0], e->slave_fd) < 0 || move_fd(p[0], e->master_fd) != 0) {
+		close(p[1]);
+		return "error: unplug: dup2 failed";
+	}
+	fcntl(e->slave_fd, F_SETFD, FD_CLOEXEC);
+	unplug_hold = p[1];
+	e->tx_len = 0;
+	record_event(e, "unplug", "%s", e->pty_name);
+	return "ok";
+}
+
+static const char *link_replug(struct emu *e)
+{
+	if (unplug_hold < 0)
+		return "error: replug: not unplugged";
+	int old_master = e->master_fd, old_slave = e->slave_fd;
+	if (pty_open(e) != 0) {
+		if (e->master_fd >= 0 && e->master_fd != old_master)
+			close(e->master_fd);
+		if (e->slave_fd >= 0 && e->slave_fd != old_slave)
+			close(e->slave_fd);
+		e->master_fd = old_master;
+		e->slave_fd = old_slave;
+		return "error: replug: cannot open a new pty (see stderr)";
+	}
+	if (move_fd(e->master_fd, old_master) != 0 || move_fd(e->slave_fd, old_slave) != 0)
+		return "error: replug: dup2 failed";
+	e->master_fd = old_master;
+	e->slave_fd = old_slave;
+	close(unplug_hold);
+	unplug_hold = -1;
+	e->tx_len = 0; /* sent while unplugged: gone */
+	record_event(e, "replug", "%s", e->pty_name);
+	return "ok";
+}
+
+static int hex_nibble(char c)
+{
+	if (c >= '0' && c <= '9')
+		return c - '0';
+	if (c >= 'a' && c <= 'f')
+		return c - 'a' + 10;
+	if (c >= 'A' && c <= 'F')
+		return c - 'A' + 10;
+	return -1;
+}
+
+static const char *link_inject(struct emu *e, const char *hex)
+{
+	size_t len = strlen(hex);
+	if (len == 0 || len % 2 || len / 2 > 240)
+		return "error: usage: inject HEX (2 to 480 hex digits)";
+	for (size_t i = 0; i < len; i++)
+		if (hex_nibble(hex[i]) < 0)
+			return "error: inject: not hex";
+	size_t n = len / 2;
+	if (e->tx_len + n > EMU_TX_BUFFER)
+		return "error: inject: the board's queue is full";
+	for (size_t i = 0; i < n; i++)
+		e->tx[e->tx_len++] = (uint8_t)(hex_nibble(hex[2 * i]) << 4 | hex_nibble(hex[2 * i + 1]));
+	record_event(e, "inject", "%zu", n);
+	return "ok";
 }
 
 static void reply(struct emu *e, const char *fmt, const char *arg)
@@ -201,6 +315,22 @@ static void command(struct emu *e, char *line)
 		char buf[32];
 		snprintf(buf, sizeof buf, "%lu", v);
 		reply(e, "peek %s", buf);
+	} else if (!strcmp(cmd, "unplug") || !strcmp(cmd, "replug")) {
+		if (argc != 1) {
+			reply(e, "error: usage: %s", cmd);
+			return;
+		}
+		reply(e, "%s", !strcmp(cmd, "unplug") ? link_unplug(e) : link_replug(e));
+	} else if (!strcmp(cmd, "inject")) {
+		reply(e, "%s", argc == 2 ? link_inject(e, argv[1]) : "error: usage: inject HEX");
+	} else if (!strcmp(cmd, "drop")) {
+		if (argc != 3 || parse_double(argv[1], &a) || parse_double(argv[2], &b) || a < 0 ||
+		    a > 1 || b < 0) {
+			reply(e, "error: usage: drop RATE SECONDS (RATE 0..1)%s", "");
+			return;
+		}
+		record_link_drop(e, a, b);
+		reply(e, "ok%s", "");
 	} else if (!strcmp(cmd, "reboot")) {
 		emu_reboot = 1;
 		reply(e, "ok%s", "");
@@ -214,6 +344,8 @@ static void command(struct emu *e, char *line)
 
 void control_poll(struct emu *e)
 {
+	if (unplug_hold >= 0)
+		e->tx_len = 0; /* unplugged: what the board sends goes nowhere */
 	if (e->ctl_eof)
 		return;
 	struct pollfd pfd = {.fd = 0, .events = POLLIN};

@@ -54,10 +54,68 @@ void record_close(struct emu *e)
 	e->record = NULL;
 }
 
+/* Frame loss on the board's stream (the fault matrix's flaky link, `drop RATE SECONDS` on
+ * the control channel): while it lasts, each board frame is lost whole with probability
+ * RATE, decided at its first byte. frame_byte runs right after the UART hook queued the
+ * byte for the pty (board.c), so a lost frame's bytes are taken back off the queue's end
+ * before they are ever written, its delimiter too: the host sees the frames around it
+ * intact. The frame is still recorded (board_frame, what the firmware wrote), then
+ * `frame_lost`. */
+static struct {
+	double rate;
+	double until_s; /* CLOCK_MONOTONIC */
+	uint64_t rng;
+	int dropping; /* the frame now being written is lost */
+	uint64_t lost;
+} link_drop;
+
+/* Defined here, declared by its caller (control.c). */
+void record_link_drop(struct emu *e, double rate, double for_s);
+uint64_t record_frames_lost(void);
+
+void record_link_drop(struct emu *e, double rate, double for_s)
+{
+	link_drop.rate = rate;
+	link_drop.until_s = mono_s() + for_s;
+	if (!link_drop.rng)
+		link_drop.rng = e->seed * 0x9E3779B97F4A7C15ULL + 1;
+	record_event(e, "link_drop", "%.4f,%.3f", rate, for_s);
+}
+
+uint64_t record_frames_lost(void)
+{
+	return link_drop.lost;
+}
+
+static double drop_uniform(void)
+{
+	uint64_t x = link_drop.rng; /* xorshift64 */
+	x ^= x << 13;
+	x ^= x >> 7;
+	x ^= x << 17;
+	link_drop.rng = x;
+	return (double)(x >> 11) / 9007199254740992.0;
+}
+
+/* The byte the UART hook just queued is taken back (never when the queue was full: the
+ * hook dropped it itself). */
+static void take_back(struct emu *e, uint8_t byte)
+{
+	if (e->tx_len > 0 && e->tx_len < EMU_TX_BUFFER && e->tx[e->tx_len - 1] == byte)
+		e->tx_len--;
+}
+
 /* One byte of a COBS stream; at a delimiter, records
  * "event,type,seq,encoded_len,first_byte_t_us". */
 void frame_byte(struct emu *e, struct frame_peek *f, uint8_t byte, const char *event)
 {
+	if (f == &e->tx_frame) {
+		if (byte != 0 && f->len == 0)
+			link_drop.dropping = link_drop.rate > 0.0 && mono_s() < link_drop.until_s &&
+					     drop_uniform() < link_drop.rate;
+		if (link_drop.dropping)
+			take_back(e, byte);
+	}
 	if (byte != 0) {
 		if (f->len == 0)
 			f->start_us = board_us(e);
@@ -83,5 +141,11 @@ void frame_byte(struct emu *e, struct frame_peek *f, uint8_t byte, const char *e
 			     (unsigned long long)f->start_us);
 	else
 		record_event(e, event, "?,?,%d,%llu", f->len, (unsigned long long)f->start_us);
+	if (f == &e->tx_frame && link_drop.dropping) {
+		link_drop.dropping = 0;
+		link_drop.lost++;
+		record_event(e, "frame_lost", "0x%02x,%u", out >= 1 ? dec[0] : 0,
+			     out >= 2 ? dec[1] : 0);
+	}
 	f->len = f->raw_len = 0;
 }
