@@ -13,20 +13,22 @@ from dthc_tools.emulated_board import EmulatedBoard
 __all__ = ["run_conformance"]
 
 
-def run_conformance(board: EmulatedBoard, only: Sequence[str] = ()) -> dict[str, Any]:
+def run_conformance(
+    board: EmulatedBoard, only: Sequence[str] = (), *, home: bool = False
+) -> dict[str, Any]:
     """Every check (or ``only`` these, with what they are measured with), SIGUSR2 for the
     reset check, the plate 5 mm below the start; fails naming every failed check with its
     figures. The JSON report."""
-    extra = ["--only", ",".join(only)] if only else []
+    extra = (["--only", ",".join(only)] if only else []) + (["--home"] if home else [])
     done = subprocess.run(
         [sys.executable, "-m", "dthc_bridge.conformance", str(board.pty), "--yes",
-         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json", "--home",
-         *extra],
+         "--start-z-mm", "25", "--reset-signal-pid", str(board.pid), "--json", *extra],
         capture_output=True, text=True, timeout=120, check=False,
     )  # fmt: skip
     report: dict[str, Any] = json.loads(done.stdout)
-    # The Nano's build has no home switch input: its homing cycle is skipped, by design.
-    homes = "HOMING" in str(report["board"]["capabilities"])
+    # The homing cycle runs when asked (``home``) of a board that homes: the Nano's build
+    # has no home switch input, and its cycle is skipped by design.
+    homes = home and "HOMING" in str(report["board"]["capabilities"])
     failed = [
         f"{c['name']}: {c['figure']}"
         for c in report["checks"]
