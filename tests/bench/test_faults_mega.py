@@ -174,16 +174,18 @@ def test_the_emulators_link_faults_unplug_replug_inject_and_drop(tmp_path: Path)
 @needs_tools
 @pytest.mark.slow
 @pytest.mark.timeout(120)
-def test_two_cells_mid_cut_hold_on_the_emulated_mega() -> None:
-    """The daemon killed while cutting (its supervisor restarts it) and corrupt bytes in the
-    board's stream while cutting, against the firmware on the emulated Mega: no torch-on
-    past the lease at the relay pin, nothing lost or doubled, back within 2 s. The cells
-    are the emulator's: its record saw the daemon's frames and its clock ran."""
+def test_a_cell_mid_cut_holds_on_the_emulated_mega() -> None:
+    """The daemon killed while cutting (its supervisor restarts it), against the firmware
+    on the emulated Mega: no torch-on past the lease at the relay pin, nothing lost or
+    doubled, back within 2 s. The cell is the emulator's: its record saw the daemon's frames
+    and its clock ran. (The corrupt-byte and frame-loss faults' emulator side is
+    test_the_emulators_link_faults_unplug_replug_inject_and_drop; one cell keeps the suite
+    short, the whole matrix is the bench's.)"""
     parser = argparse.ArgumentParser()
     faults.add_arguments(parser)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args([
-        "--board", "atmega2560", "--faults", "daemon_kill_restart,corrupt_burst",
+        "--board", "atmega2560", "--faults", "daemon_kill_restart",
         "--phases", "cutting", "--json",
     ])  # fmt: skip
     result = faults.run(args)
@@ -192,7 +194,7 @@ def test_two_cells_mid_cut_hold_on_the_emulated_mega() -> None:
     assert result["unsafe_torch_ms"] == 0.0
     matrix = result["matrix"]
     assert isinstance(matrix, list)
-    killed, corrupt = matrix
+    (killed,) = matrix
     for cell in matrix:
         assert cell["board"] == "atmega2560"
         assert cell["board_serials"] == ["DTHC-MEGA-0001"], cell  # the firmware's HELLO
@@ -204,4 +206,3 @@ def test_two_cells_mid_cut_hold_on_the_emulated_mega() -> None:
         assert cell["recovery_s"] <= faults.RECOVERY_GOAL_S
     assert "LEASE_EXPIRED" in str(killed["daemon_faults"]), killed
     assert killed["restart_line"] == 5
-    assert corrupt["outcome"] == "completed", corrupt
