@@ -119,20 +119,18 @@ def _best_decay(t0_s: float, times_s: Sequence[float], volts: Sequence[float]) -
     return best
 
 
-def fit_through_transient(
+def _joint_fit(
     transient: StartTransient,
     times_s: Sequence[float],
     distances_mm: Sequence[float],
     volts: Sequence[float],
     *,
     with_slope: bool,
-) -> tuple[float, float, float] | None:
-    """The cut's voltage at distance 0 with the transient gone, from the pierce's voltages
-    and the cut's (``volts``, a held torch's, at ``times_s`` and ``distances_mm``) together:
-    ``V = A_pierce | A_cut + b·d + C·exp(-(t - t0)/tau)``, one decay shared by both, best
-    ``tau`` on the grid. The pierce sees the decay's start, the cut its tail, so ``tau`` is
-    far better pinned down than by the pierce alone. Returns ``(A_cut, b, rms residual of
-    the cut's samples)``, or None without a pierce model or enough samples."""
+) -> tuple[float, list[float], float] | None:
+    """The pierce's voltages (median of three) and the cut's, one decay shared by both:
+    ``V = A_pierce | A_cut [+ b·d] + C·exp(-(t - t0)/tau)``, best ``tau`` on the grid.
+    Returns ``(tau, coefficients, rms residual of the cut's samples)``, or None without a
+    pierce model or enough samples."""
     t0 = transient.t0_s
     n_p = len(transient.volts)
     n_c = len(volts)
@@ -158,6 +156,27 @@ def fit_through_transient(
     residual = math.sqrt(
         sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, volts, strict=True)) / n_c
     )
+    return tau, coef, residual
+
+
+def fit_through_transient(
+    transient: StartTransient,
+    times_s: Sequence[float],
+    distances_mm: Sequence[float],
+    volts: Sequence[float],
+    *,
+    with_slope: bool,
+) -> tuple[float, float, float] | None:
+    """The cut's voltage at distance 0 with the transient gone, from the pierce's voltages
+    and the cut's (``volts``, a held torch's, at ``times_s`` and ``distances_mm``) together:
+    ``V = A_pierce | A_cut + b·d + C·exp(-(t - t0)/tau)``, one decay shared by both, best
+    ``tau`` on the grid. The pierce sees the decay's start, the cut its tail, so ``tau`` is
+    far better pinned down than by the pierce alone. Returns ``(A_cut, b, rms residual of
+    the cut's samples)``, or None without a pierce model or enough samples."""
+    fit = _joint_fit(transient, times_s, distances_mm, volts, with_slope=with_slope)
+    if fit is None:
+        return None
+    _, coef, residual = fit
     return coef[1], (coef[2] if with_slope else 0.0), residual
 
 
@@ -167,34 +186,15 @@ def refit_decay(
     """The decay seen by the pierce and by the cut's first voltages together (a held torch's,
     ``volts`` at ``times_s``; a flat plate): ``V = A_pierce | A_cut + C·exp(-(t - t0)/tau)``,
     best ``tau`` on the grid. Returns ``(C, tau, rms residual of the cut's samples)``, or
-    None without a pierce model or enough samples. The pierce alone sees the decay's first
-    0.3 s and leaves ``tau`` uncertain by a factor of two; its tail pins it down."""
-    t0 = transient.t0_s
-    n_p = len(transient.volts)
-    n_c = len(volts)
-    if t0 is None or transient.overshoot_v <= 0.0 or n_p < _MIN_POINTS or n_c < _MIN_POINTS:
+    None without a pierce model with an overshoot or enough samples. The pierce alone sees
+    the decay's first 0.3 s and leaves ``tau`` uncertain by a factor of two; its tail pins
+    it down."""
+    if transient.overshoot_v <= 0.0:
         return None
-    p_in = transient.volts
-    pierce = [p_in[0], *(sorted(p_in[i - 1 : i + 2])[1] for i in range(1, n_p - 1)), p_in[-1]]
-    rows_t = [*transient.times_s, *times_s]
-    ys = [*pierce, *volts]
-    zeros = [0.0] * n_c
-    best: tuple[float, float, list[float]] | None = None  # (sse, tau, coefficients)
-    for tau in _TAUS_S:
-        rows = _design(rows_t, n_p, zeros, t0, tau, with_slope=False)
-        coef = _least_squares(rows, ys)
-        if coef is None:
-            continue
-        sse = sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, ys, strict=True))
-        if best is None or sse < best[0]:
-            best = (sse, tau, coef)
-    if best is None:
+    fit = _joint_fit(transient, times_s, [0.0] * len(volts), volts, with_slope=False)
+    if fit is None:
         return None
-    _, tau, coef = best
-    rows = _design(rows_t, n_p, zeros, t0, tau, with_slope=False)[n_p:]
-    residual = math.sqrt(
-        sum((y - _dot(coef, row)) ** 2 for row, y in zip(rows, volts, strict=True)) / n_c
-    )
+    tau, coef, residual = fit
     return coef[2], tau, residual
 
 
