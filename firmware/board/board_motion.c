@@ -1,10 +1,10 @@
 /*
  * board_motion.c - Z: trapezoidal Z_MOVE, Z_PROBE with its stop on contact (Z_PROBE_AWAY:
- * up, stopped on the release of every sensor of its set), Z_VELOCITY
- * with expiry, Z_STOP, soft limits, Z_HOME on the home switch (protocol 1.3). Runs once per tick: the velocity ramps towards what
- * the mode wants by at most the acceleration limit per tick, and the step generator gets
- * bounds it never steps past (a move's target, a probe's end, the soft limits, an active
- * limit switch), so a late tick cannot overshoot them.
+ * up, stopped on the release of every sensor of its set), Z_VELOCITY with expiry, Z_STOP,
+ * soft limits, Z_HOME on the home switch (protocol 1.3). Runs once per tick: the velocity
+ * ramps towards what the mode wants by at most the acceleration limit per tick, and the
+ * step generator gets bounds it never steps past (a move's target, a probe's end, the soft
+ * limits, an active limit switch), so a late tick cannot overshoot them.
  */
 #include "board_internal.h"
 
@@ -177,7 +177,7 @@ static void home_done(int32_t z_um)
     B.last_home.seq = B.home_seq;
     B.last_home.result = B.home_outcome;
     B.last_home.z_um = z_um;
-    B.last_home.shift_um = B.home_outcome == DTHC_HOME_HOMED ? B.home_shift_um : 0;
+    B.last_home.shift_um = B.home_shift_um; /* 0 until the re-seek found the switch */
     B.last_home.t_us = hal_time_us();
     B.home_seq = 0;
     board_send_home_result();
@@ -369,12 +369,11 @@ static int32_t home_tick(int32_t steps, int32_t z, int32_t *lo, int32_t *hi)
 void board_z_velocity(int32_t velocity_um_s, uint16_t expiry_ms)
 {
     int32_t vmax = B.cfg->z_max_speed_um_s;
+    bool ending = B.move_seq || B.probe_seq; /* a command with a report: it ends here */
 #if BOARD_HOMING
-    if (B.home_seq) {
-        board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
-    }
+    ending = ending || B.home_seq;
 #endif
-    if (B.move_seq || B.probe_seq) {
+    if (ending) {
         board_z_end(DTHC_MOTION_SUPERSEDED, DTHC_PROBE_ABORTED);
     }
     B.z_mode = Z_VELOCITY;
