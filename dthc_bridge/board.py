@@ -15,7 +15,7 @@ import asyncio
 from collections import OrderedDict
 from collections.abc import AsyncGenerator, Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, Literal, NamedTuple, TypeVar
 
 import firmware_protocol as fp
 
@@ -30,6 +30,7 @@ __all__ = [
     "BoardReport",
     "FaultReport",
     "HomeEnded",
+    "HomingMode",
     "HomingPlan",
     "InputChange",
     "MoveEnded",
@@ -118,12 +119,16 @@ class ProbeEnded:
     stop_z_mm: float
 
 
+HomingMode = Literal["off", "at_start", "required"]
+
+
 @dataclass(frozen=True, slots=True)
 class HomingPlan:
-    """When and how the daemon homes Z (the daemon's [board.homing]): ``off``, ``at_start``
-    (each time the board comes online unhomed) or ``required`` (and no cut until homed)."""
+    """When and how the daemon homes Z (the daemon's [board.homing], whose defaults these
+    are): ``off``, ``at_start`` (each time the board comes online unhomed) or ``required``
+    (and no cut until homed)."""
 
-    mode: str = "off"
+    mode: HomingMode = "off"
     seek_mm_s: float = 20.0
     locate_mm_s: float = 2.0
     backoff_mm: float = 2.0

@@ -39,6 +39,7 @@ from pydantic_settings import BaseSettings, PydanticBaseSettingsSource, Settings
 
 import firmware_protocol as fp
 
+from .board import HomingMode, HomingPlan
 from .code_map import parse_code_map
 from .controller.commands import ThcMode
 from .controller.sequence import SequenceConfig
@@ -58,6 +59,7 @@ __all__ = [
 _LINK = LinkTiming()
 _SEQ = SequenceConfig()
 _THC = ThcConfig()
+_HOMING = HomingPlan()
 
 
 class _Closed(BaseModel):
@@ -70,12 +72,19 @@ class HomingSettings(_Closed):
     refuses cuts while Z is unhomed. Off by default: the firmware cannot tell whether a
     switch is wired, and a seek with none runs Z into its hard stop for ``max_travel_mm``."""
 
-    mode: Literal["off", "at_start", "required"] = "off"
-    seek_mm_s: float = Field(20.0, gt=0.0, le=200.0, description="up to the switch")
-    locate_mm_s: float = Field(2.0, gt=0.0, le=50.0, description="the slow re-seek")
-    backoff_mm: float = Field(2.0, gt=0.0, le=20.0, description="off the switch, and parked")
-    max_travel_mm: float = Field(200.0, gt=0.0, le=2000.0, description="the seek's limit")
-    timeout_s: float = Field(30.0, gt=0.0, le=65.0)
+    mode: HomingMode = _HOMING.mode
+    seek_mm_s: float = Field(_HOMING.seek_mm_s, gt=0.0, le=200.0, description="up to the switch")
+    locate_mm_s: float = Field(_HOMING.locate_mm_s, gt=0.0, le=50.0, description="the slow re-seek")
+    backoff_mm: float = Field(
+        _HOMING.backoff_mm, gt=0.0, le=20.0, description="off the switch, and parked"
+    )
+    max_travel_mm: float = Field(
+        _HOMING.max_travel_mm, gt=0.0, le=2000.0, description="the seek's limit"
+    )
+    timeout_s: float = Field(_HOMING.timeout_s, gt=0.0, le=65.0)
+
+    def plan(self) -> HomingPlan:
+        return HomingPlan(**self.model_dump())
 
 
 class BoardSettings(_Closed):

@@ -20,12 +20,7 @@ import structlog
 import firmware_protocol as fp
 
 from .board import BoardClient, HomingPlan
-from .config import (
-    BoardSettings,
-    ControllerConfigs,
-    ControllerSettings,
-    DaemonConfig,
-)
+from .config import BoardSettings, ControllerConfigs, ControllerSettings, DaemonConfig
 from .consumables import ConsumableLog, default_consumables_file
 from .controller.dialect import Dialect
 from .controller.plasma import PlasmaController, default_material
@@ -131,7 +126,7 @@ def build_service(config: DaemonConfig) -> tuple[LinkSupervisor, ControllerServi
     settings = config.controller
     service = controller_service(
         settings, supervisor, client, board_setup=board_setup(config.board),
-        homing=HomingPlan(**config.board.homing.model_dump()),
+        homing=config.board.homing.plan(),
         # A backstop only: the gateway's request deadline cancels (and so aborts) first.
         command_timeout_s=config.mqtt.request_deadline_s + 5.0,
         consumables=ConsumableLog(settings.consumables_file or default_consumables_file()),

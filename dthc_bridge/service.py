@@ -580,11 +580,11 @@ class ControllerService:
             z_range = self.client.z_range_mm()
             if z_range is not None:
                 self.sequence.config = with_board_limits(self.sequence.config, *z_range)
+            status = session.initial_status if session is not None else None
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
             if self.homing.mode != "off":
-                self._spawn(self._home_z(session.initial_status if session else None), "homing")
-            status = session.initial_status if session is not None else None
+                self._spawn(self._home_z(status), "homing")
             if status is not None and status.faults:
                 # A fault latched while we were away (the lease ran out during an unplug):
                 # the operator re-arms before the next cut, which also resets the board.

@@ -55,7 +55,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "events", "fp",
     ),
     "mqtt": ("port", "requests", "backoff"),
-    "config": ("controller", "link", "mqtt.settings", "code_map", "fp"),
+    "config": ("controller", "link", "board", "mqtt.settings", "code_map", "fp"),
     "program": ("controller", "units", "materials", "code_map", "config"),
     "logs": ("link.frametrace",),
     "conformance": ("link", "transport", "logs", "fp"),

@@ -279,5 +279,5 @@ def test_the_homing_section_defaults_are_the_services() -> None:
     from dthc_bridge.board import HomingPlan
     from dthc_bridge.config import HomingSettings
 
-    assert HomingPlan(**HomingSettings().model_dump()) == HomingPlan()
+    assert HomingSettings().plan() == HomingPlan()
     assert HomingPlan().mode == "off"
