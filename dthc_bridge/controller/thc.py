@@ -359,7 +359,7 @@ class ThcController:
             s.at_speed_velocity_mm_s += a * (s.velocity_mm_s - s.at_speed_velocity_mm_s)
         if target_v is not None:
             seen_v = v_f
-            if self.noise_burst and s.averaged_v is not None and cfg.burst_average_s > 0.0:
+            if self.noise_burst and s.averaged_v is not None:  # None: burst_average_s 0
                 seen_v = s.averaged_v  # a burst: the longer average
             error_v = target_v - seen_v  # positive: voltage low, torch too close
             deadband = cfg.deadband_v

@@ -18,15 +18,11 @@ from dthc_tools.emulated_board import (
     EmulatedBoard,
     HarnessOptions,
     RecordEvent,
-    missing_tools,
     read_record,
 )
 from dthc_tools.emulated_board.harness import torch_on_edges, unsafe_torch_us
+from tests.emulated_board.conftest import needs_tools
 
-MISSING = missing_tools()
-needs_tools = pytest.mark.skipif(
-    bool(MISSING), reason=f"emulated-board build tools missing: {', '.join(MISSING)}"
-)
 GRACE_US = 251_250  # a 250 ms lease, one 1 ms sample period, the 250 µs decode tolerance
 
 
