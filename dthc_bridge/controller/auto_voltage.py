@@ -9,7 +9,11 @@ machine is at speed; then, ``fit_window_s`` from the window's start, one correct
 (``AutoVoltage.refine``): the voltages since the window began, less what the THC moved Z
 (what a held torch would read), fitted against the distance cut (V = a + b * d); ``a`` is
 the voltage where XY started, over the probed point. :func:`fitted_voltage` says when the
-line is not to be trusted (the mean is kept).
+line is not to be trusted (the mean is kept). Where that fit found a flat plate (no slope
+told from noise), the window goes on to ``flat_window_s`` and, if the plate is still flat
+over all of it, the target becomes the mean of all of it: on a flat plate the 0.3 s mean's
+noise (about ±0.06 V, 0.008 mm) was most of the target's error, and a held torch reads
+the same voltage for as long as the plate stays flat.
 """
 
 from __future__ import annotations
@@ -58,6 +62,10 @@ class AutoVoltage:
     last_s: float | None = None  # the previous batch's time
     mean_v: float | None = None  # the estimate before the fit refined it
     refined: bool = False
+    # A flat plate: the window goes on to this length (from its start) and the mean of all
+    # of it replaces the target, once, if the plate is still flat. At most fit_window_s: no.
+    flat_window_s: float = 0.0
+    extending: bool = False  # the fit found a flat plate; the longer window is running
 
     def sample(
         self, now: float, filtered_v: float | None, distance_mm: float, void: bool
@@ -83,25 +91,46 @@ class AutoVoltage:
 
     @property
     def wants_refining(self) -> bool:
-        return self.mean_v is not None and not self.refined
+        return self.mean_v is not None and (not self.refined or self.extending)
 
     def refine(
         self, now: float, held_v: float | None, distance_mm: float, void: bool
     ) -> float | None:
         """One batch after the mean was taken, ``held_v`` the voltage a held torch would
-        read: the refined voltage once, when the fit window is over and the fit is
-        plausible; else None (and the mean stays)."""
+        read: the refined voltage when the fit window is over and the fit is plausible,
+        and on a flat plate once more when the longer window is; else None (the estimate
+        stays)."""
         if self.limits is None or self.since is None or self.mean_v is None:
             self.refined = True
             return None
         self._count(now, held_v)  # a void lock's batches count (a kerf, not a gap)
         if held_v is not None and not void:
             self._keep(now, held_v, distance_mm)
+        if self.extending:
+            return self._flat_mean(now, self.limits)
         if self._covered_s(now) < self.fit_window_s:
             return None
         self.refined = True
         line = line_fit(self.distances_mm, self.volts, self.limits)
-        return self._through_transient(self.limits, line) or (None if line is None else line[0])
+        through = self._through_transient(self.limits, line)
+        if through is not None:
+            return through
+        if line is None:
+            return None
+        # A flat plate (line_fit gives slope 0 where no slope is told from noise).
+        self.extending = line[1] == 0.0 and self.flat_window_s > self.fit_window_s
+        return line[0]
+
+    def _flat_mean(self, now: float, limits: FitLimits) -> float | None:
+        """The longer window on a flat plate: at its end, the mean of all of it where the
+        plate is still flat over all of it (else the fit window's target stays)."""
+        if self._covered_s(now) < self.flat_window_s:
+            return None
+        self.extending = False
+        line = line_fit(self.distances_mm, self.volts, limits)
+        if line is None or line[1] != 0.0:
+            return None  # the plate bent or tilted later: what was fitted near 0 is better
+        return line[0]
 
     def _count(self, now: float, held_v: float | None) -> None:
         """The time since the previous batch is a gap when this batch has no voltage."""

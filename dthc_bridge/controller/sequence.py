@@ -98,6 +98,11 @@ class SequenceConfig:
     # plate), the mean of all those voltages: the line's value at 0 is a few times noisier.
     auto_voltage_min_slope_t: float = 2.0
     auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
+    # ...and there the window goes on to auto_voltage_flat_window_s from its start: if the
+    # plate is still flat over all of it, the target becomes the mean of all of it (a
+    # held torch over a flat plate reads the same voltage all along: less noise, measured
+    # in docs/benchmarks.md). At most auto_voltage_fit_window_s: off.
+    auto_voltage_flat_window_s: float = 2.0
     # The start transient, measured over the pierce delay (controller/start_transient.py):
     # measuring waits until what is left of it is below auto_voltage_max_transient_v (at
     # most auto_voltage_max_wait_s from arc OK), and what is left is subtracted.
@@ -514,6 +519,7 @@ class CutSequence:
             window_s=cfg.auto_voltage_window_s,
             fit_window_s=cfg.auto_voltage_fit_window_s,
             limits=limits if cfg.auto_voltage_fit else None,
+            flat_window_s=cfg.auto_voltage_flat_window_s,
         )
         return _Cut(zero_mm, start_xy=xy_mm, relay=relay, auto_voltage=auto)
 
@@ -920,7 +926,8 @@ class CutSequence:
 
     def _measure_cut_height_v(self, now: float) -> None:
         """One batch of the cut-height voltage's measurement (every cut): the mean first,
-        then auto voltage's one correction by the line fit; an auto target follows it."""
+        then auto voltage's correction by the line fit (and on a flat plate the longer
+        window's mean); an auto target follows it."""
         cut = self.cut
         assert cut is not None
         assert cut.auto_voltage is not None

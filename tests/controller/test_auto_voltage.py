@@ -3,6 +3,8 @@ lock, then one refinement by a line fit back to distance 0."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import pytest
 
 from dthc_bridge.controller.auto_voltage import AutoVoltage, FitLimits, fitted_voltage, line_fit
@@ -110,3 +112,67 @@ def test_halves_that_disagree_about_a_slope_not_told_from_noise_give_the_mean() 
     assert fit is not None
     assert fit[0] == pytest.approx(120.125)
     assert fit[1] == 0.0
+
+
+FLAT_LIMITS = FitLimits(
+    max_plate_slope_v_per_mm=0.02 * 7.5,
+    min_span_mm=1.0,
+    max_residual_v=1.0,
+    max_slope_change_v_per_mm=0.05,
+    min_slope_t=2.0,
+    min_slope_v_per_mm=0.025,
+)
+
+
+def _run_flat_window(volts_at: Callable[[float, float], float]) -> list[tuple[float, float]]:
+    """Batches every 5 ms at 100 mm/s from t = 1 s, the voltage ``volts_at(t, d)``: every
+    estimate the window gives, with its time since the window began."""
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=FLAT_LIMITS, flat_window_s=2.0)
+    found: list[tuple[float, float]] = []
+    i = 0
+    while auto.mean_v is None or auto.wants_refining:
+        t, d = 1.0 + 0.005 * i, 0.5 * i
+        v = volts_at(t - 1.0, d)
+        got = (
+            auto.sample(t, v, d, void=False)
+            if auto.mean_v is None
+            else auto.refine(t, v, d, void=False)
+        )
+        if got is not None:
+            found.append((round(t - 1.0, 3), got))
+        i += 1
+        assert i < 1000
+    return found
+
+
+def _noise(t: float) -> float:
+    """+-0.4 V, alternating batch by batch: a flat plate's noise, no slope in it."""
+    return 0.4 if round(t / 0.005) % 2 else -0.4
+
+
+def test_on_a_flat_plate_the_longer_window_s_mean_replaces_the_fit_window_s() -> None:
+    """The first 0.3 s read 0.1 V high (their noise), the rest true (120 V): the target
+    at 0.3 s carries the 0.1 V; at 2 s the mean of all of it, 0.015 V high."""
+    found = _run_flat_window(lambda t, d: 120.0 + (0.1 if t < 0.3 else 0.0) + _noise(t))
+    assert [t for t, _ in found] == [0.05, 0.3, 2.0]
+    assert found[1][1] == pytest.approx(120.1, abs=0.01)
+    assert found[2][1] == pytest.approx(120.0 + 0.1 * 0.3 / 2.0, abs=0.003)
+
+
+def test_a_plate_that_tilts_after_the_fit_window_keeps_the_fit_window_s_target() -> None:
+    """Flat for 0.3 s, then rising 0.1 V per mm: over 2 s the line has a slope, so the mean
+    of it would carry the tilt; the target fitted at 0.3 s stays."""
+
+    def volts(t: float, d: float) -> float:
+        return 120.0 + _noise(t) + (0.1 * (d - 150.0) if d > 150.0 else 0.0)
+
+    found = _run_flat_window(volts)
+    assert [t for t, _ in found] == [0.05, 0.3]
+    assert found[1][1] == pytest.approx(120.0, abs=0.01)
+
+
+def test_a_sloped_plate_is_not_averaged_longer() -> None:
+    """The fit at 0.3 s found a slope: no longer window, one refinement as before."""
+    found = _run_flat_window(lambda t, d: 122.0 - 0.0375 * d)
+    assert [t for t, _ in found] == [0.05, 0.3]
+    assert found[1][1] == pytest.approx(122.0)
