@@ -63,6 +63,24 @@ def test_the_pierce_measures_the_decay_through_a_high_frequency_start(seed: int)
     assert transient.remnant_v(0.75) == pytest.approx(true_left, abs=0.75)
 
 
+def test_spiked_batches_at_transfer_do_not_choose_the_time_constant() -> None:
+    """noisy_hf_start seed 18: the first two batches' medians spiked (200 and 225 V over
+    a 172 V start), and the best fit was a 31 V "decay" of 0.02 s that explained those two
+    and left nothing of the real one (0.27 s) by 0.7 s: auto voltage measured 1.4 V of it.
+    No arc settles that fast: with time constants from 0.055 s the two are outliers."""
+    transient = StartTransient()
+    rng = random.Random(18)
+    for batch in range(60):
+        volts = [_arc_v((batch * 5 + i) * 0.001, 152.0) + rng.gauss(0.0, 0.5) for i in range(5)]
+        if batch < 2:  # three of the five samples spiked: the batch's median too
+            volts = [v + (28.0 if batch == 0 else 53.0) if i < 3 else v for i, v in enumerate(volts)]
+        transient.add(batch * 0.005 + 0.004, volts)
+    transient.fit()
+    assert transient.tau_s == pytest.approx(TAU_S, rel=0.3)
+    true_left = OVERSHOOT_V * math.exp(-0.7 / TAU_S)
+    assert transient.remnant_v(0.7) == pytest.approx(true_left, abs=0.6)
+
+
 def test_a_steady_pierce_has_no_transient_to_wait_for() -> None:
     """No decay in the pierce's voltages: no model, nothing left at any time."""
     transient = StartTransient()
