@@ -73,7 +73,8 @@ def test_spiked_batches_at_transfer_do_not_choose_the_time_constant() -> None:
     for batch in range(60):
         volts = [_arc_v((batch * 5 + i) * 0.001, 152.0) + rng.gauss(0.0, 0.5) for i in range(5)]
         if batch < 2:  # three of the five samples spiked: the batch's median too
-            volts = [v + (28.0 if batch == 0 else 53.0) if i < 3 else v for i, v in enumerate(volts)]
+            spike = 28.0 if batch == 0 else 53.0
+            volts = [v + spike if i < 3 else v for i, v in enumerate(volts)]
         transient.add(batch * 0.005 + 0.004, volts)
     transient.fit()
     assert transient.tau_s == pytest.approx(TAU_S, rel=0.3)
