@@ -10,10 +10,11 @@ machine is at speed; then, ``fit_window_s`` from the window's start, one correct
 (what a held torch would read), fitted against the distance cut (V = a + b * d); ``a`` is
 the voltage where XY started, over the probed point. :func:`fitted_voltage` says when the
 line is not to be trusted (the mean is kept). Where that fit found a flat plate (no slope
-told from noise), the window goes on to ``flat_window_s`` and, if the plate is still flat
-over all of it, the target becomes the mean of all of it: on a flat plate the 0.3 s mean's
-noise (about ±0.06 V, 0.008 mm) was most of the target's error, and a held torch reads
-the same voltage for as long as the plate stays flat.
+told from noise, or a flat fit through the start transient's tail), the window goes on to
+``flat_window_s`` and, if the plate is still flat over all of it, the target becomes the
+same fit over all of it: on a flat plate the 0.3 s window's noise (about ±0.06 V, 0.008
+mm) was most of the target's error, and a held torch reads the same voltage for as long
+as the plate stays flat.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class AutoVoltage:
     # of it replaces the target, once, if the plate is still flat. At most fit_window_s: no.
     flat_window_s: float = 0.0
     extending: bool = False  # the fit found a flat plate; the longer window is running
+    through_transient: bool = False  # ...by the fit through the start transient
 
     def sample(
         self, now: float, filtered_v: float | None, distance_mm: float, void: bool
@@ -112,21 +114,32 @@ class AutoVoltage:
             return None
         self.refined = True
         line = line_fit(self.distances_mm, self.volts, self.limits)
+        longer = self.flat_window_s > self.fit_window_s
         through = self._through_transient(self.limits, line)
         if through is not None:
-            return through
+            level_v, flat = through
+            self.extending = self.through_transient = flat and longer
+            return level_v
         if line is None:
             return None
         # A flat plate (line_fit gives slope 0 where no slope is told from noise).
-        self.extending = line[1] == 0.0 and self.flat_window_s > self.fit_window_s
+        self.extending = line[1] == 0.0 and longer
         return line[0]
 
     def _flat_mean(self, now: float, limits: FitLimits) -> float | None:
-        """The longer window on a flat plate: at its end, the mean of all of it where the
-        plate is still flat over all of it (else the fit window's target stays)."""
+        """The longer window on a flat plate: at its end, the mean of all of it (or the flat
+        fit through the start transient over all of it) where the plate is still flat over
+        all of it; else the fit window's target stays."""
         if self._covered_s(now) < self.flat_window_s:
             return None
         self.extending = False
+        if self.through_transient:
+            args = (self.transient, self.times_s, self.distances_mm, self.held_v)
+            sloped = fit_through_transient(*args, with_slope=True)
+            if sloped is None or abs(sloped[1]) > limits.min_slope_v_per_mm:
+                return None  # the plate bent or tilted later
+            flat = fit_through_transient(*args, with_slope=False)
+            return flat[0] if flat is not None and _plausible(flat, limits) else None
         line = line_fit(self.distances_mm, self.volts, limits)
         if line is None or line[1] != 0.0:
             return None  # the plate bent or tilted later: what was fitted near 0 is better
@@ -151,11 +164,12 @@ class AutoVoltage:
 
     def _through_transient(
         self, limits: FitLimits, line: tuple[float, float] | None
-    ) -> float | None:
+    ) -> tuple[float, bool] | None:
         """The pierce's and the cut's voltages fitted together (start_transient): with a
         plate slope where the line fit found one, else flat (a line through a decay's tail
         and noise over 30 mm is mostly noise: measured, docs/benchmarks.md); None where
-        there is no pierce model or it does not fit (the line fit alone then decides)."""
+        there is no pierce model or it does not fit (the line fit alone then decides).
+        ``(voltage, flat)``: flat where the fit had no slope."""
         args = (self.transient, self.times_s, self.distances_mm, self.held_v)
         # Only where a decay may still be going on (the pierce's model leaves some of it at
         # the window's start, or found none in the noise): otherwise the line fit is the
@@ -171,14 +185,14 @@ class AutoVoltage:
         if line is not None and not flat_plate:
             sloped = fit_through_transient(*args, with_slope=True)
             if sloped is not None and _plausible(sloped, limits):
-                return sloped[0]
+                return sloped[0], False
         flat = fit_through_transient(*args, with_slope=False)
         if flat is None or not _plausible(flat, limits) or self.mean_v is None:
             return None
         # A flat fit far from the first mean took a plate's drift for the decay's tail.
         if abs(flat[0] - self.mean_v) > limits.max_transient_correction_v:
             return None
-        return flat[0]
+        return flat[0], True
 
 
 def _plausible(fit: tuple[float, float, float], limits: FitLimits) -> bool:

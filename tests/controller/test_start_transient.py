@@ -136,6 +136,37 @@ def test_the_fit_through_the_transient_removes_its_tail() -> None:
     assert refined == pytest.approx(128.0, abs=0.3)
 
 
+@pytest.mark.parametrize(("tilt_v_per_mm", "estimates"), [(0.0, 3), (0.1, 2)])
+def test_the_fit_through_the_transient_goes_on_over_a_flat_plate(
+    tilt_v_per_mm: float, estimates: int
+) -> None:
+    """Over a flat plate the fit through the transient's tail is made again over the
+    longer window (a third estimate, nearer the level: 0.4 V of noise, 0.3 s against
+    2 s); a plate that tilts after the first 0.3 s keeps the first fit (two estimates)."""
+    rng = random.Random(5)
+    transient = _pierce(rng, spikes_per_s=0.0)
+    auto = AutoVoltage(
+        window_s=0.05, fit_window_s=0.3, limits=LIMITS, transient=transient, flat_window_s=2.0
+    )
+
+    def volts(t: float, d: float) -> float:
+        tilt = tilt_v_per_mm * (d - 45.0) if d > 45.0 else 0.0
+        return _arc_v(t, 128.0) + rng.gauss(0.0, 0.4) + tilt
+
+    t, d = 0.7, 30.0
+    found: list[float] = []
+    while auto.mean_v is None or auto.wants_refining:
+        v = volts(t, d)
+        got = auto.sample(t, v, d, False) if auto.mean_v is None else auto.refine(t, v, d, False)
+        if got is not None:
+            found.append(got)
+        t, d = t + 0.005, d + 0.2
+    assert len(found) == estimates
+    assert found[1] == pytest.approx(128.0, abs=0.3)
+    if estimates == 3:
+        assert abs(found[2] - 128.0) < 0.05
+
+
 @pytest.mark.parametrize("seed", [1, 4, 5])
 def test_auto_voltage_on_a_noisy_cutter_with_a_slow_transient(seed: int) -> None:
     """noisy_hf_start (20 V of overshoot, 5 % left at 0.8 s; 2 V noise bursts; spikes):
@@ -151,6 +182,25 @@ def test_auto_voltage_on_a_noisy_cutter_with_a_slow_transient(seed: int) -> None
     truth = loop.plant.arc.voltage_at_height_v(1.5)
     assert cut.cut_height_v == pytest.approx(truth, abs=0.5)
     assert cut.transient.overshoot_v > 10.0
+
+
+@pytest.mark.parametrize("seed", [15, 18])
+def test_auto_voltage_on_a_noisy_cutter_within_a_tenth_of_a_volt(seed: int) -> None:
+    """The same plant, seeds held out of the benchmark's goals, once the longer window
+    on a flat plate is over: within 0.1 V (0.013 mm). Seed 18's pierce fitted a 0.02 s
+    decay to two spiked batches (+1.2 V without the floor on the time constant); seed
+    15's flat fit through the transient's tail was 0.21 V low over the first 0.3 s (the
+    same fit over 2 s: 0.03 V)."""
+    loop = ready("noisy_hf_start", seed=seed, cut_voltage_v=None)
+    assert loop.m3().ok
+    assert loop.move("G1 X350 Y50 F2550", max_s=20)
+    cut = loop.sequence.cut
+    assert cut is not None
+    assert cut.cut_height_v is not None
+    assert cut.auto_voltage is not None
+    assert not cut.auto_voltage.wants_refining  # the longer window is over
+    truth = loop.plant.arc.voltage_at_height_v(1.5)
+    assert cut.cut_height_v == pytest.approx(truth, abs=0.1)
 
 
 def test_the_wait_for_the_transient_is_bounded() -> None:
