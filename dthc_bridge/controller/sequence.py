@@ -96,7 +96,11 @@ class SequenceConfig:
     auto_voltage_max_slope_change: float = 0.05  # V/mm, first half - second half
     # ...and where the fitted slope is within this many standard errors of 0 (a flat
     # plate), the mean of all those voltages: the line's value at 0 is a few times noisier.
-    auto_voltage_min_slope_t: float = 2.0
+    # 3, not 2: the standard error takes the batches as independent, but the 40 Hz filter
+    # makes neighbours share noise; at 2, 6 % of a small hole's flat 6.6 mm windows (1300
+    # mm/min) gave a slope, extrapolated 20 mm back to 0.3 V and more off (measured:
+    # tests/controller/test_auto_voltage.py; a MASSO program's hole 0.6 V low).
+    auto_voltage_min_slope_t: float = 3.0
     auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
     # ...and there the window goes on to auto_voltage_flat_window_s from its start: if the
     # plate is still flat over all of it, the target becomes the mean of all of it (a
