@@ -63,8 +63,9 @@ class AutoVoltage:
     last_s: float | None = None  # the previous batch's time
     mean_v: float | None = None  # the estimate before the fit refined it
     refined: bool = False
-    # A flat plate: the window goes on to this length (from its start) and the mean of all
-    # of it replaces the target, once, if the plate is still flat. At most fit_window_s: no.
+    # A flat plate: the window goes on to this length (from its start) and the same fit
+    # over all of it (the mean, or the flat fit through the transient) replaces the target,
+    # once, if the plate is still flat. At most fit_window_s: no longer window.
     flat_window_s: float = 0.0
     extending: bool = False  # the fit found a flat plate; the longer window is running
     through_transient: bool = False  # ...by the fit through the start transient

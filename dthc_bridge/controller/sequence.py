@@ -102,10 +102,11 @@ class SequenceConfig:
     # tests/controller/test_auto_voltage.py; a MASSO program's hole 0.6 V low).
     auto_voltage_min_slope_t: float = 3.0
     auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
-    # ...and there the window goes on to auto_voltage_flat_window_s from its start: if the
-    # plate is still flat over all of it, the target becomes the mean of all of it (a
-    # held torch over a flat plate reads the same voltage all along: less noise, measured
-    # in docs/benchmarks.md). At most auto_voltage_fit_window_s: off.
+    # ...and there (or where the fit through the start transient found no slope) the
+    # window goes on to auto_voltage_flat_window_s from its start: if the plate is still
+    # flat over all of it, the target becomes the same fit over all of it (a held torch
+    # over a flat plate reads the same voltage all along: less noise, measured in
+    # docs/benchmarks.md). At most auto_voltage_fit_window_s: off.
     auto_voltage_flat_window_s: float = 2.0
     # The start transient, measured over the pierce delay (controller/start_transient.py):
     # measuring waits until what is left of it is below auto_voltage_max_transient_v (at
