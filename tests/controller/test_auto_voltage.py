@@ -117,20 +117,23 @@ def test_halves_that_disagree_about_a_slope_not_told_from_noise_give_the_mean() 
     assert fit[1] == 0.0
 
 
-FLAT_LIMITS = FitLimits(
-    max_plate_slope_v_per_mm=0.02 * 7.5,
-    min_span_mm=1.0,
-    max_residual_v=1.0,
-    max_slope_change_v_per_mm=0.05,
-    min_slope_t=2.0,
-    min_slope_v_per_mm=0.025,
-)
+def _default_limits() -> FitLimits:
+    """The limits the sequence builds from its defaults, at 7.5 V/mm."""
+    cfg = SequenceConfig()
+    return FitLimits(
+        max_plate_slope_v_per_mm=cfg.auto_voltage_max_plate_slope * 7.5,
+        min_span_mm=cfg.auto_voltage_min_span_mm,
+        max_residual_v=cfg.auto_voltage_max_residual_v,
+        max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
+        min_slope_t=cfg.auto_voltage_min_slope_t,
+        min_slope_v_per_mm=cfg.auto_voltage_min_slope_v_per_mm,
+    )
 
 
 def _run_flat_window(volts_at: Callable[[float, float], float]) -> list[tuple[float, float]]:
     """Batches every 5 ms at 100 mm/s from t = 1 s, the voltage ``volts_at(t, d)``: every
     estimate the window gives, with its time since the window began."""
-    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=FLAT_LIMITS, flat_window_s=2.0)
+    auto = AutoVoltage(window_s=0.05, fit_window_s=0.3, limits=_default_limits(), flat_window_s=2.0)
     found: list[tuple[float, float]] = []
     i = 0
     while auto.mean_v is None or auto.wants_refining:
@@ -179,19 +182,6 @@ def test_a_sloped_plate_is_not_averaged_longer() -> None:
     found = _run_flat_window(lambda t, d: 122.0 - 0.0375 * d)
     assert [t for t, _ in found] == [0.05, 0.3]
     assert found[1][1] == pytest.approx(122.0)
-
-
-def _default_limits() -> FitLimits:
-    """The limits the sequence builds from its defaults, at 7.5 V/mm."""
-    cfg = SequenceConfig()
-    return FitLimits(
-        max_plate_slope_v_per_mm=cfg.auto_voltage_max_plate_slope * 7.5,
-        min_span_mm=cfg.auto_voltage_min_span_mm,
-        max_residual_v=cfg.auto_voltage_max_residual_v,
-        max_slope_change_v_per_mm=cfg.auto_voltage_max_slope_change,
-        min_slope_t=cfg.auto_voltage_min_slope_t,
-        min_slope_v_per_mm=cfg.auto_voltage_min_slope_v_per_mm,
-    )
 
 
 def _small_hole_window(seed: int, slope_v_per_mm: float) -> tuple[list[float], list[float]]:
