@@ -96,11 +96,14 @@ class SequenceConfig:
     auto_voltage_max_slope_change: float = 0.05  # V/mm, first half - second half
     # ...and where the fitted slope is within this many standard errors of 0 (a flat
     # plate), the mean of all those voltages: the line's value at 0 is a few times noisier.
-    # 3, not 2: the standard error takes the batches as independent, but the 40 Hz filter
-    # makes neighbours share noise; at 2, 6 % of a small hole's flat 6.6 mm windows (1300
-    # mm/min) gave a slope, extrapolated 20 mm back to 0.3 V and more off (measured:
-    # tests/controller/test_auto_voltage.py; a MASSO program's hole 0.6 V low).
-    auto_voltage_min_slope_t: float = 3.0
+    # 5, not 2: the standard error takes the batches as independent, but the 40 Hz filter
+    # makes neighbours share noise, and a small hole's window is short: at 1300 mm/min
+    # 6.6 mm, 15-25 mm in. At 2, 6 % of such windows over a flat plate gave a slope
+    # (extrapolated 0.3 V and more off; at 3, 1.5 %); in programs, a hole 0.6 V low at
+    # t 2.2 and one 0.77 V high at t 3.7 (tests/sim/test_auto_voltage_program.py). The
+    # warped plates' slopes stand at t 10 and more; a warped plate's small hole loses its
+    # slope (t 3-4, 0.3 V) to the mean.
+    auto_voltage_min_slope_t: float = 5.0
     auto_voltage_min_slope_v_per_mm: float = 0.025  # 0.33 % of plate slope at 7.5 V/mm
     # ...and there (or where the fit through the start transient found no slope) the
     # window goes on to auto_voltage_flat_window_s from its start: if the plate is still

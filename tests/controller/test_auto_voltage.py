@@ -200,9 +200,9 @@ def _small_hole_window(seed: int, slope_v_per_mm: float) -> tuple[list[float], l
 
 
 def test_a_small_holes_flat_window_rarely_passes_for_a_slope() -> None:
-    """Over 400 noise draws of a flat plate, the default limits find a slope in under 2 %
-    (at 2 standard errors: 24, 6 %, every one extrapolated more than 0.3 V off); a real
-    0.1 V/mm slope is found as often as before (204)."""
+    """Over 400 noise draws of a flat plate, the default limits find no slope (at 2
+    standard errors: 24, every one extrapolated more than 0.3 V off; at 3: 6); a real
+    0.1 V/mm slope is found about as often (197; 204 at 2)."""
     limits = _default_limits()
     false_slopes = 0
     found = 0
@@ -211,5 +211,5 @@ def test_a_small_holes_flat_window_rarely_passes_for_a_slope() -> None:
         false_slopes += fit is not None and fit[1] != 0.0
         real = line_fit(*_small_hole_window(seed, 0.1), limits)
         found += real is not None and real[1] != 0.0
-    assert false_slopes <= 8
-    assert found >= 200
+    assert false_slopes <= 2
+    assert found >= 190
