@@ -23,7 +23,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from .start_transient import StartTransient, fit_through_transient
+from .start_transient import StartTransient, TransientFit, fit_through_transient
 
 __all__ = ["AutoVoltage", "FitLimits", "fitted_voltage"]
 
@@ -69,6 +69,7 @@ class AutoVoltage:
     flat_window_s: float = 0.0
     extending: bool = False  # the fit found a flat plate; the longer window is running
     through_transient: bool = False  # ...by the fit through the start transient
+    tau_s: float | None = None  # ...whose time constant the longer window keeps
 
     def sample(
         self, now: float, filtered_v: float | None, distance_mm: float, void: bool
@@ -135,12 +136,14 @@ class AutoVoltage:
             return None
         self.extending = False
         if self.through_transient:
+            # The time constant the fit window found: the longer window refits the levels
+            # and the slope only (a solve per fit, not the grid's 32, in the event loop).
             args = (self.transient, self.times_s, self.distances_mm, self.held_v)
-            sloped = fit_through_transient(*args, with_slope=True)
-            if sloped is None or abs(sloped[1]) > limits.min_slope_v_per_mm:
+            sloped = fit_through_transient(*args, with_slope=True, tau_s=self.tau_s)
+            if sloped is None or abs(sloped.slope_v_per_mm) > limits.min_slope_v_per_mm:
                 return None  # the plate bent or tilted later
-            flat = fit_through_transient(*args, with_slope=False)
-            return flat[0] if flat is not None and _plausible(flat, limits) else None
+            flat = fit_through_transient(*args, with_slope=False, tau_s=self.tau_s)
+            return flat.level_v if flat is not None and _plausible(flat, limits) else None
         line = line_fit(self.distances_mm, self.volts, limits)
         if line is None or line[1] != 0.0:
             return None  # the plate bent or tilted later: what was fitted near 0 is better
@@ -186,19 +189,22 @@ class AutoVoltage:
         if line is not None and not flat_plate:
             sloped = fit_through_transient(*args, with_slope=True)
             if sloped is not None and _plausible(sloped, limits):
-                return sloped[0], False
+                return sloped.level_v, False
         flat = fit_through_transient(*args, with_slope=False)
         if flat is None or not _plausible(flat, limits) or self.mean_v is None:
             return None
         # A flat fit far from the first mean took a plate's drift for the decay's tail.
-        if abs(flat[0] - self.mean_v) > limits.max_transient_correction_v:
+        if abs(flat.level_v - self.mean_v) > limits.max_transient_correction_v:
             return None
-        return flat[0], True
+        self.tau_s = flat.tau_s
+        return flat.level_v, True
 
 
-def _plausible(fit: tuple[float, float, float], limits: FitLimits) -> bool:
-    _, slope, residual = fit
-    return abs(slope) <= limits.max_plate_slope_v_per_mm and residual <= limits.max_residual_v
+def _plausible(fit: TransientFit, limits: FitLimits) -> bool:
+    return (
+        abs(fit.slope_v_per_mm) <= limits.max_plate_slope_v_per_mm
+        and fit.residual_v <= limits.max_residual_v
+    )
 
 
 def fitted_voltage(
