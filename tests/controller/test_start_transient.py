@@ -147,16 +147,15 @@ def test_the_fit_through_the_transient_goes_on_over_a_flat_plate(
     2 s); a plate that tilts after the first 0.3 s keeps the first fit (two estimates).
     The longer window keeps the time constant the 0.3 s fit found: over 400 batches the
     grid's 32 took 55 ms of the event loop in one batch, one takes about 3 ms."""
-    from dthc_bridge.controller import auto_voltage
+    from dthc_bridge.controller.start_transient import fit_through_transient as real_fit
 
     taus: list[float | None] = []
-    real_fit = auto_voltage.fit_through_transient
 
     def recording(*args: Any, tau_s: float | None = None, **kwargs: Any) -> Any:
         taus.append(tau_s)  # None: the grid
         return real_fit(*args, tau_s=tau_s, **kwargs)
 
-    monkeypatch.setattr(auto_voltage, "fit_through_transient", recording)
+    monkeypatch.setattr("dthc_bridge.controller.auto_voltage.fit_through_transient", recording)
     rng = random.Random(5)
     transient = _pierce(rng, spikes_per_s=0.0)
     auto = AutoVoltage(
