@@ -886,6 +886,14 @@ class CutSequence:
         assert cut is not None
         return cut.arc_ok_since is not None and now - cut.arc_ok_since >= self.config.thc_delay_s
 
+    def _settled(self, now: float) -> bool:
+        """At speed a little while (a slow torch's voltage rise decays some tens of ms
+        after the machine is back at speed)."""
+        cut = self.cut
+        assert cut is not None
+        since = cut.at_speed_since
+        return since is not None and now - since >= self.config.at_speed_settle_s
+
     def _sample_transient_tail(self, now: float) -> None:
         """During the THC delay, at speed, the voltage a held torch reads: the start
         transient's tail, fitted with the pierce's voltages when the delay ends."""
@@ -893,13 +901,9 @@ class CutSequence:
         assert cut is not None
         if cut.tail_fitted or self._delay_done(now) or not self.config.thc_discounts_transient:
             return
-        settled = (
-            cut.at_speed_since is not None
-            and now - cut.at_speed_since >= self.config.at_speed_settle_s
-        )
         held_v = self._held_v()
         if (
-            not settled
+            not self._settled(now)
             or held_v is None
             or self.thc.noise_burst
             or self.thc.locks(now) - {Lock.FROZEN}

@@ -392,14 +392,14 @@ def _thc_step(seq: CutSequence, volts: Sequence[float], period_s: float, dt: flo
         cut.at_speed_since = now
     # The voltage rise of a slow torch decays only some tens of ms after the machine is
     # back at speed: take the target once it has been at speed a little while.
-    settled = cut.at_speed_since is not None and now - cut.at_speed_since >= cfg.at_speed_settle_s
+    settled = seq._settled(now)
     # The THC delay guards the start transient, so it counts from arc OK; until it is
     # over the THC may only raise the torch (ThcController.rise_only). A fixed target
     # applies from the start; an auto target is taken as early as the transient allows,
     # before the plate has drifted away from the height that was just probed
     # (dthc_bridge/controller/auto_voltage.py).
     arc_ok_since = cut.arc_ok_since if cut.arc_ok_since is not None else now
-    delay_done = now - arc_ok_since >= cfg.thc_delay_s
+    delay_done = seq._delay_done(now)
     arc_lost_running = cut.arc_lost_since is not None or not seq.torch_enabled or cut.torch_out
     fixed_v = seq.params.cut_voltage_v
     if fixed_v is not None and seq.base_v is None:
