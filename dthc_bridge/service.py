@@ -583,8 +583,9 @@ class ControllerService:
             status = session.initial_status if session is not None else None
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
-            if self.homing.mode != "off":
-                self._spawn(self._home_z(status), "homing")
+            if self.homing.mode != "off" and self._needs_homing(status):
+                # Decided here, not in the task: an M3 already queued must find it refused.
+                self._spawn(self._home_z(), "homing")
             if status is not None and status.faults:
                 # A fault latched while we were away (the lease ran out during an unplug):
                 # the operator re-arms before the next cut, which also resets the board.
@@ -595,10 +596,10 @@ class ControllerService:
             # The torch-off request cannot reach an absent board; the board's lease does it.
             self.pump()
 
-    async def _home_z(self, status: fp.Status | None) -> None:
-        """[board.homing] at_start / required: home Z when the board comes online unhomed
-        (a daemon restart finds it homed and leaves it). Cuts wait while it homes; with
-        ``required`` they are refused until it has homed."""
+    def _needs_homing(self, status: fp.Status | None) -> bool:
+        """[board.homing] at_start / required, the board just online: whether Z homes now
+        (a daemon restart finds it homed and leaves it); cuts and Z commands wait from this
+        moment, before the homing task first runs."""
         settings, sequence = self.homing, self.sequence
         required = settings.mode == "required"
         if not self.client.can_home():
@@ -609,13 +610,21 @@ class ControllerService:
                 else ""
             )
             log.warning("homing_unsupported", mode=settings.mode)
-            return
+            return False
         if status is not None and status.status & fp.StatusBit.HOMED:
             sequence.unhomed = ""
             log.info("homing_kept", z_mm=status.z_um / 1000)
-            return
+            return False
         sequence.unhomed = "Z is homing: the cut waits until it has found its home switch"
+        sequence.homing = True
         log.info("homing_started", mode=settings.mode)
+        return True
+
+    async def _home_z(self) -> None:
+        """Home Z (``_needs_homing`` said so); with ``required`` cuts are refused until it
+        has homed."""
+        settings, sequence = self.homing, self.sequence
+        required = settings.mode == "required"
         failure = ""
         try:
             ended = await self.client.home(
@@ -627,7 +636,9 @@ class ControllerService:
             )
         except (TimeoutError, LinkError) as exc:
             failure = f"Z homing failed: {exc}"
-        else:
+        finally:
+            sequence.homing = False
+        if not failure:
             if ended.homed:
                 log.info("homed", z_mm=ended.z_mm, shift_mm=ended.shift_mm)
             else:

@@ -227,6 +227,7 @@ class CutSequence:
         # Why a torch start is refused until Z is homed ("": it is not), set by the
         # service: while the board homes, and unhomed when [board.homing] requires it.
         self.unhomed = ""
+        self.homing = False  # the board is homing Z: no command may move Z meanwhile
 
     # --- plumbing --------------------------------------------------------------------------
 
@@ -271,6 +272,9 @@ class CutSequence:
     def _require_armed(self, word: str) -> None:
         if self.state is State.FAULTED:
             raise CommandError(word, f"re-arm required after: {self.error}")
+        if self.homing:
+            # A Z command would end the board's homing cycle (ABORTED), unhomed.
+            raise CommandError(word, "Z is homing: wait until it has found its home switch")
 
     def snapshot(self) -> dict[str, Any]:
         p = self.params

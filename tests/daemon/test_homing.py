@@ -13,8 +13,9 @@ import pytest
 
 import firmware_protocol as fp
 from dthc_bridge.board import BoardClient, HomingPlan
+from dthc_bridge.controller.commands import JogZ
 from dthc_bridge.controller.plasma import PlasmaController
-from dthc_bridge.link import LinkSupervisor, LinkTiming
+from dthc_bridge.link import LinkState, LinkStateChange, LinkSupervisor, LinkTiming
 from dthc_bridge.service import ControllerService
 from mock_device.board_logic import BoardIdentity
 from mock_device.sim import SimulatedBoard
@@ -47,7 +48,7 @@ async def _settled(service: ControllerService, timeout_s: float = 20.0) -> None:
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout_s
     await asyncio.sleep(0.2)
-    while service.sequence.unhomed.startswith("Z is homing"):
+    while service.sequence.homing:
         assert loop.time() < end, "homing did not end"
         await asyncio.sleep(0.05)
 
@@ -111,3 +112,43 @@ async def test_off_never_homes_and_required_without_a_switch_input_refuses() -> 
             assert not refused.ok
             assert "no home switch input" in refused.error
     assert board.firmware.executed["ZHome"] == 0
+
+
+async def test_from_the_moment_the_board_is_online_cuts_and_z_commands_wait_for_homing() -> None:
+    """The service decides to home inside its ONLINE handler, not in the task it spawns: a
+    listener called right after it (as an M3 already queued would run) finds cuts refused
+    and homing on; a Z jog meanwhile is refused (it would end the board's cycle ABORTED),
+    and the cycle still ends homed."""
+    board = SimulatedBoard("flat_clean", seed=2, identity=BoardIdentity(boot_z_mm=45.0))
+    sim = RealtimeSimBoard(board)
+    seen: list[tuple[str, bool]] = []
+    async with sim.running():
+        supervisor = LinkSupervisor("sim://board", TIMING, opener=sim.opener)
+        plan = HomingPlan(mode="required", **FAST)
+        service = ControllerService(
+            PlasmaController(), supervisor, BoardClient(supervisor), homing=plan
+        )
+
+        def after_the_service(change: LinkStateChange) -> None:
+            if change.state is LinkState.ONLINE:
+                seen.append((service.sequence.unhomed, service.sequence.homing))
+
+        supervisor.add_state_listener(after_the_service)
+        tasks = [asyncio.create_task(supervisor.run()), asyncio.create_task(service.run())]
+        try:
+            await supervisor.wait_online(3.0)
+            assert seen
+            unhomed, homing = seen[0]
+            assert unhomed.startswith("Z is homing")
+            assert homing
+            jog = await service.execute_command(JogZ(-1.0))
+            assert not jog.ok
+            assert "Z is homing" in jog.error
+            await _settled(service)
+            assert service.sequence.unhomed == ""
+            assert board.firmware.executed["ZHome"] == 1
+            assert (await service.client.status()).status & fp.StatusBit.HOMED
+        finally:
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
