@@ -289,7 +289,9 @@ static int32_t home_tick(int32_t steps, int32_t z, int32_t *lo, int32_t *hi)
 {
     bool closed = (B.inputs & (1u << DTHC_INPUT_Z_LIMIT_MAX)) != 0;
     int32_t want = 0;
-    *lo = B.home_lo_steps; /* the soft limits do not hold until Z is found */
+    /* Up, the soft limit does not hold until Z is found (the switch sits above it); down,
+     * it does: a switch that never opens must not take the torch into the plate. */
+    *lo = B.home_lo_steps > min_steps ? B.home_lo_steps : min_steps;
     *hi = B.home_hi_steps;
     if (B.home_outcome == BOARD_NO_OUTCOME && (int32_t)(B.now_us - B.home_deadline_us) >= 0) {
         B.home_outcome = DTHC_HOME_TIMEOUT;

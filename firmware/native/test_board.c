@@ -1380,6 +1380,19 @@ static int test_limit_switch_stops_and_latches(void)
     run_ms(600);
     seq = cmd_u16(DTHC_MSG_FAULT_RESET, FAULT(Z_LIMIT));
     CHECK(is_ack(seq, 0) && !faults(), "Z_LIMIT not cleared");
+    /* The max switch (the home switch) latches too, outside Z_HOME. */
+    n_out = parsed_to = 0;
+    z_move(90000, 20000);
+    run_ms(300);
+    CHECK(F.rate > 0, "not moving up");
+    F.inputs = IN(Z_LIMIT_MAX);
+    run_ms(1);
+    steps = F.steps;
+    f = last(DTHC_MSG_FAULT, -1, 0);
+    CHECK(f && dthc_fault_get_code(f->p) == DTHC_FAULT_Z_LIMIT && dthc_fault_get_detail(f->p) == 1,
+          "no Z_LIMIT max fault");
+    CHECK(F.hi == steps, "the step generator may still step up (hi %d, at %d)", (int)F.hi,
+          (int)steps);
     return 0;
 }
 
@@ -1581,6 +1594,31 @@ static int test_home_ends_not_found_timeout_and_aborted(void)
     return 0;
 }
 
+/* A home switch that never opens (stuck, or wired closed): the back-off down ends
+ * NO_RELEASE at Z min, not max_travel_um down (200 mm here: 140 mm into the plate). */
+static int test_home_with_a_switch_that_never_opens_stops_at_z_min(void)
+{
+    const frame_t *f = NULL;
+    uint8_t seq;
+    uint32_t t;
+    int32_t z;
+    quiet_batches();
+    F.inputs |= IN(Z_LIMIT_MAX);
+    seq = z_home(20000, 2000, 2000, 200000, 15000);
+    for (t = 0; t < 12000 && !f; t++) {
+        run_ms(1);
+        if (t % 100 == 99) {
+            send(DTHC_MSG_HEARTBEAT, NULL, 0);
+        }
+        f = last(DTHC_MSG_HOME_RESULT, seq, 0);
+    }
+    CHECK(f && dthc_home_result_get_result(f->p) == DTHC_HOME_NO_RELEASE, "not NO_RELEASE");
+    z = z_um();
+    CHECK(z >= 0 && z <= 100, "homing left Z at %ld, not at Z min 0", (long)z);
+    CHECK(!(status_bits() & DTHC_STATUS_HOMED), "HOMED after NO_RELEASE");
+    return 0;
+}
+
 /* The refusals of PROTOCOL.md 6.1, each naming its field; nothing moves. */
 static int test_home_refusals(void)
 {
@@ -1663,6 +1701,7 @@ static const struct {
     T(home_starting_on_the_switch_backs_off_first),
     T(home_ends_not_found_timeout_and_aborted),
     T(home_refusals),
+    T(home_with_a_switch_that_never_opens_stops_at_z_min),
 #undef T
 };
 #define N_TESTS (sizeof TESTS / sizeof TESTS[0])
