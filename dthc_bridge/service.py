@@ -87,6 +87,7 @@ class ControllerService:
     ) -> None:
         self.controller = controller
         self.homing = homing or HomingPlan()
+        self._home_after_rearm = False  # homing waits for a latched fault's re-arm
         # Pierces and arc-on time (consumable life), counted from the board's batches.
         self.consumables = consumables or ConsumableLog(None)
         self._pierces_seen = controller.sequence.pierce_count
@@ -467,6 +468,10 @@ class ControllerService:
             await client.set_current(action.current_a)
         elif isinstance(action, act.ResetFaults):
             await client.fault_reset()
+            if self._home_after_rearm:
+                self._home_after_rearm = False
+                if self._needs_homing(await client.status()):
+                    self._spawn(self._home_z(), "homing")
 
     def _spawn(self, work: Any, name: str = "board-completion") -> None:
         task = asyncio.create_task(work, name=name)
@@ -583,9 +588,18 @@ class ControllerService:
             status = session.initial_status if session is not None else None
             if self.board_setup is not None:
                 self._spawn(self._setup_board(self.board_setup))
-            if self.homing.mode != "off" and self._needs_homing(status):
-                # Decided here, not in the task: an M3 already queued must find it refused.
-                self._spawn(self._home_z(), "homing")
+            if self.homing.mode != "off":
+                if status is not None and status.faults:
+                    # The board refuses Z_HOME while a fault is latched (an E-stop held at
+                    # power-up): it homes once the operator has re-armed.
+                    self._home_after_rearm = True
+                    self.sequence.unhomed = (
+                        "Z is not homed: a fault was latched when the board came online; it "
+                        "homes once re-armed"
+                    )
+                elif self._needs_homing(status):
+                    # Decided here, not in the task: an M3 already queued must find it refused.
+                    self._spawn(self._home_z(), "homing")
             if status is not None and status.faults:
                 # A fault latched while we were away (the lease ran out during an unplug):
                 # the operator re-arms before the next cut, which also resets the board.
@@ -651,7 +665,7 @@ class ControllerService:
             log.warning("homing_failed", error=failure)
         sequence.unhomed = (
             f'{failure}; [board.homing] mode is "required": no cut until Z has homed (mend '
-            "the switch, then restart the service: it homes again)"
+            "the switch, then restart the service or reconnect the board: it homes again)"
             if failure and required
             else ""
         )

@@ -152,3 +152,24 @@ async def test_from_the_moment_the_board_is_online_cuts_and_z_commands_wait_for_
             for task in tasks:
                 task.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
+
+
+async def test_a_board_online_with_a_fault_latched_homes_once_re_armed() -> None:
+    """An E-stop held at power-up latches ESTOP, and the board refuses Z_HOME while a fault
+    is latched: the cut is refused, the operator releases the E-stop and re-arms, and then
+    Z homes (before, it stayed unhomed until the service restarted)."""
+    board = SimulatedBoard("flat_clean", seed=2, identity=BoardIdentity(boot_z_mm=45.0))
+    board.plant.force_input(fp.InputMask.ESTOP, True)
+    sim = RealtimeSimBoard(board)
+    async with sim.running(), _daemon(sim, HomingPlan(mode="required", **FAST)) as service:
+        await asyncio.sleep(0.3)
+        assert not (await service.execute_gcode("M3")).ok
+        assert board.firmware.executed["ZHome"] == 0
+        board.plant.force_input(fp.InputMask.ESTOP, None)
+        await asyncio.sleep(0.1)
+        rearmed = await service.execute_request("rearm", {})
+        assert rearmed.ok, rearmed.error
+        await _settled(service)
+        assert service.sequence.unhomed == ""
+        assert board.firmware.executed["ZHome"] == 1
+        assert (await service.client.status()).status & fp.StatusBit.HOMED
