@@ -20,7 +20,7 @@ from typing import Any, Literal, NamedTuple, TypeVar
 import firmware_protocol as fp
 
 from .link import BoardTooOld, LinkSupervisor, RequestTimeout
-from .link.session import BoardSession
+from .link.session import REPORT_REPLY, BoardSession
 from .link.supervisor import ErrorListener, StateListener
 
 __all__ = [
@@ -163,11 +163,7 @@ BatchListener = Callable[[Batch], None]
 ReportListener = Callable[[BoardReport], None]
 Telemetry = Batch | BoardReport  # what the telemetry() stream yields
 _Report = TypeVar("_Report", fp.MotionDone, fp.ProbeResult, fp.HomeResult)
-_COMPLETION_QUERY = {
-    fp.MotionDone: fp.QueryWhat.MOTION_DONE,
-    fp.ProbeResult: fp.QueryWhat.PROBE_RESULT,
-    fp.HomeResult: fp.QueryWhat.HOME_RESULT,
-}
+_COMPLETION_QUERY = {report: what for what, report in REPORT_REPLY.items()}
 
 
 def _report_from_wire(msg: fp.Report, t_s: float) -> BoardReport | None:

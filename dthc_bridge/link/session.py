@@ -59,7 +59,8 @@ class SessionTrace(Protocol):
 
 
 _REPLY_TYPES = (fp.Ack, fp.Nak, fp.HelloInfo, fp.Status, fp.Clock)
-_REPORT_REPLY = {
+# The report a QUERY of each kind answers with (BoardClient asks the other way round).
+REPORT_REPLY = {
     fp.QueryWhat.PROBE_RESULT: fp.ProbeResult,
     fp.QueryWhat.MOTION_DONE: fp.MotionDone,
     fp.QueryWhat.HOME_RESULT: fp.HomeResult,
@@ -191,8 +192,8 @@ class BoardSession:
             frame = fp.encode(command)
             future: asyncio.Future[fp.Message] = self._loop.create_future()
             report_reply = (
-                _REPORT_REPLY.get(fp.QueryWhat(command.what))
-                if isinstance(command, fp.Query) and command.what in _REPORT_REPLY
+                REPORT_REPLY.get(fp.QueryWhat(command.what))
+                if isinstance(command, fp.Query) and command.what in REPORT_REPLY
                 else None
             )
             self._pending[seq] = _Pending(future, command, report_reply)
