@@ -512,7 +512,7 @@ async def _matrix(args: argparse.Namespace, workdir: Path) -> dict[str, object]:
     }  # fmt: skip
     paces = [c["emulator"] for c in cells if "emulator" in c]
     if paces:  # how the emulated MCU kept up with the wall clock over the whole matrix
-        totals["emulator_speed_min"] = min(p["speed"] for p in paces if p["speed"])
+        totals["emulator_speed_min"] = min((p["speed"] for p in paces if p["speed"]), default=None)
         totals["emulator_max_lag_ms"] = max(p["max_lag_ms"] for p in paces)
     goals = [
         Goal("unsafe_torch_ms", float(totals["unsafe_torch_ms"]), 0, at_most=True, unit=" ms"),

@@ -1,6 +1,6 @@
 """``bench faults --board atmega2560``: the fault matrix on the reference firmware's ELF on
 the emulated Mega. Its ground truth from the emulator's record (pure), the emulator's link
-faults as the matrix strikes them, and two cells run for real."""
+faults as the matrix strikes them, and one cell run for real."""
 
 from __future__ import annotations
 
