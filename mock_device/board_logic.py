@@ -34,6 +34,7 @@ __all__ = ["UNKNOWN_TYPE", "BoardIdentity", "BoardLogic", "PlantPort", "ZAxisPor
 
 ADC_COUNTS_PER_VOLT = 100  # the simulated front end: the board's raw count is a centivolt
 PROBE_AWAY_MINOR = 2  # the protocol minor that brought Z_PROBE_AWAY (1.2)
+HOMING_MINOR = 3  # ...and Z_HOME with the HOMING capability (1.3)
 # Host frames that are commands (executed once per seq); the rest are queries or streamed.
 _NOT_COMMANDS = (fp.Hello, fp.Query, fp.ClockQuery, fp.ZVelocity)
 _Z_LIMIT_BITS = int(InputMask.Z_LIMIT_MIN | InputMask.Z_LIMIT_MAX)
@@ -290,7 +291,9 @@ class BoardLogic:
     def _incoming(self, msg: fp.Message, frame: bytes) -> bytes:
         """The frame the board gets for a host message (the announced protocol version)."""
         ident = self.identity
-        if isinstance(msg, fp.ZProbeAway) and ident.proto_minor < PROBE_AWAY_MINOR:
+        if (isinstance(msg, fp.ZProbeAway) and ident.proto_minor < PROBE_AWAY_MINOR) or (
+            isinstance(msg, fp.ZHome) and ident.proto_minor < HOMING_MINOR
+        ):  # a type that version does not know (PROTOCOL.md §7: NAK UNKNOWN_TYPE)
             return fp.encode_frame(bytes((UNKNOWN_TYPE,)) + fp.encode_message(msg)[1:-2])
         if isinstance(msg, fp.Hello) and ident.proto_major != fp.PROTOCOL_MAJOR:
             major = fp.PROTOCOL_MAJOR if msg.proto_major == ident.proto_major else 0xFF
@@ -329,8 +332,12 @@ class BoardLogic:
             info = fp.decode_frame(frame)
             assert isinstance(info, fp.HelloInfo)
             ident = self.identity
+            capabilities = info.capabilities
+            if ident.proto_minor < HOMING_MINOR:  # a capability bit that version lacks
+                capabilities &= ~int(fp.Capability.HOMING)
             return fp.encode(info._replace(proto_major=ident.proto_major,
-                                           proto_minor=ident.proto_minor))  # fmt: skip
+                                           proto_minor=ident.proto_minor,
+                                           capabilities=capabilities))  # fmt: skip
         if kind == MsgType.SAMPLES and self.on_samples is not None:
             samples = fp.decode_frame(frame)
             assert isinstance(samples, fp.Samples)

@@ -79,3 +79,20 @@ def test_a_reboot_forgets_the_home_and_a_missing_switch_is_not_found() -> None:
     result = _home(host, fp.ZHome(0, 30_000, 2_000, 2_000, 5_000, 20_000))
     assert result.result == HomeOutcome.NOT_FOUND
     assert not _status(host).status & StatusBit.HOMED
+
+
+def test_a_board_of_protocol_1_2_has_no_homing_and_refuses_z_home_with_unknown_type() -> None:
+    """A board announcing 1.2 (PROTOCOL.md §7): HELLO_INFO without the HOMING capability,
+    and Z_HOME answered as a type it never heard of, NAK UNKNOWN_TYPE, Z still."""
+    board = SimulatedBoard("flat_clean", seed=5, identity=BoardIdentity(proto_minor=2))
+    host = SimHost(board)
+    info = host.open_session()
+    assert info.proto_minor == 2
+    assert not info.capabilities & fp.Capability.HOMING
+    before = board.plant.zaxis.position_mm
+    nak = host.request(HOME)
+    assert isinstance(nak, fp.Nak)
+    assert nak.code == fp.NakCode.UNKNOWN_TYPE
+    host.pump(100)
+    assert board.plant.zaxis.position_mm == before
+    assert board.plant.zaxis.is_idle
