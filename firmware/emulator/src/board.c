@@ -442,7 +442,7 @@ static void reset_hook(avr_t *avr)
 
 static void after_reset(struct emu *e, const char *why);
 
-static int hex_nibble(int c)
+int hex_nibble(int c)
 {
 	if (c >= '0' && c <= '9')
 		return c - '0';

@@ -42,9 +42,6 @@
 
 #include "host.h"
 
-/* record.c: frame loss on the board's stream. */
-void record_link_drop(struct emu *e, double rate, double for_s);
-uint64_t record_frames_lost(void);
 
 /* While unplugged: the write end of the pipe whose read end stands in for the pty's master
  * and slave descriptors (same numbers, so main.c's poll set stays valid: never readable,
@@ -182,16 +179,6 @@ static const char *link_replug(struct emu *e)
 	return "ok";
 }
 
-static int hex_nibble(char c)
-{
-	if (c >= '0' && c <= '9')
-		return c - '0';
-	if (c >= 'a' && c <= 'f')
-		return c - 'a' + 10;
-	if (c >= 'A' && c <= 'F')
-		return c - 'A' + 10;
-	return -1;
-}
 
 static const char *link_inject(struct emu *e, const char *hex)
 {

@@ -209,8 +209,13 @@ void pty_close(struct emu *e);
 void pty_flush_tx(struct emu *e);
 int pty_opened(struct emu *e);
 
+/* board.c: a hex digit's value, -1 if it is none */
+int hex_nibble(int c);
+
 /* record.c */
 int record_open(struct emu *e);
+void record_link_drop(struct emu *e, double rate, double for_s); /* frame loss on the stream */
+uint64_t record_frames_lost(void);
 void record_event(struct emu *e, const char *event, const char *fmt, ...)
 	__attribute__((format(printf, 3, 4)));
 void record_close(struct emu *e);

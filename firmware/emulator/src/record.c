@@ -69,10 +69,6 @@ static struct {
 	uint64_t lost;
 } link_drop;
 
-/* Defined here, declared by its caller (control.c). */
-void record_link_drop(struct emu *e, double rate, double for_s);
-uint64_t record_frames_lost(void);
-
 void record_link_drop(struct emu *e, double rate, double for_s)
 {
 	link_drop.rate = rate;
